@@ -1,0 +1,162 @@
+"""Plain, validated configuration of the simulation core.
+
+Units are SI throughout the core: metres, kilograms, seconds, newtons.
+Every dataclass validates itself on construction and raises ``ValueError`` with
+the offending field named, so a bad value never reaches a kernel.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+import math
+
+SOLVERS = ('constrained', 'paper', 'explicit')
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise ValueError(message)
+
+
+def _finite_positive(name: str, value: float) -> None:
+    _require(isinstance(value, (int, float)) and math.isfinite(value) and value > 0,
+             f'{name} must be a finite number > 0, got {value!r}')
+
+
+def _finite_non_negative(name: str, value: float) -> None:
+    _require(isinstance(value, (int, float)) and math.isfinite(value) and value >= 0,
+             f'{name} must be a finite number >= 0, got {value!r}')
+
+
+@dataclass(frozen=True)
+class SheetConfig:
+    """The sheet of SPEC §1: a rectangle on a regular, alternately triangulated grid."""
+
+    width: float = 0.210
+    """Extent along x [m] (A4 short side)."""
+    height: float = 0.297
+    """Extent along y [m] (A4 long side)."""
+    nx: int = 65
+    """Vertices along x."""
+    ny: int = 65
+    """Vertices along y."""
+    grammage: float = 0.080
+    """Areal density [kg/m²] (80 g/m² office paper)."""
+    stretch_stiffness: float = 3.0e5
+    """In-plane stiffness E·t [N/m]; each HINGE spring gets k = E·t (EA/L with A = t·L)."""
+    stretch_damping: float = 0.0
+    """Axial damping of HINGE springs [N·s/m] (used by the spring-force solvers)."""
+    bend_stiffness: float = 2.0
+    """Stiffness of BEND springs [N/m] at the reference cell size of 4.64 mm (65 vertices on
+    0.297 m); scaled with the cell size so that a sheet bends alike on any grid."""
+    bend_damping: float = 2.0e-4
+    """Axial damping of BEND springs [N·s/m]."""
+    aux_stiffness: float = 3.0e4
+    """Stiffness of AUX (damage memory) springs [N/m]."""
+    elevation: float = 0.0
+    """Height of the flat sheet above the origin [m]."""
+
+    def __post_init__(self) -> None:
+        for name in ('width', 'height', 'grammage', 'stretch_stiffness', 'bend_stiffness',
+                     'aux_stiffness'):
+            _finite_positive(name, getattr(self, name))
+        for name in ('stretch_damping', 'bend_damping'):
+            _finite_non_negative(name, getattr(self, name))
+        _require(math.isfinite(self.elevation), f'elevation must be finite, got {self.elevation}')
+        for name in ('nx', 'ny'):
+            value = getattr(self, name)
+            _require(isinstance(value, int) and 3 <= value <= 1025,
+                     f'{name} must be an integer in [3, 1025], got {value!r}')
+        _require(self.width <= 10 and self.height <= 10, 'a sheet larger than 10 m is absurd')
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Time stepping (SPEC §2)."""
+
+    method: str = 'constrained'
+    """'paper': Eq. 6 Jacobi, every spring a force; 'constrained': stretch as constraints
+    (Gauss–Seidel strain projection) plus the implicit Jacobi step for bending;
+    'explicit': symplectic Euler, kept to show why the paper needs an implicit method."""
+    dt: float = 1.0 / 60.0
+    """Frame step [s]."""
+    substeps: int = 1
+    """Integration sub-steps per frame."""
+    jacobi_iterations: int = 10
+    """Jacobi iterations of Eq. 6 per sub-step."""
+    constraint_iterations: int = 6
+    """Symmetric Gauss–Seidel sweeps of the stretch projection per sub-step ('constrained')."""
+    max_stretch: float = 0.004
+    """Stretch the projection aims for at most (l/l0 - 1)."""
+    max_compression: float = 0.004
+    """Compression the projection aims for at most (1 - l/l0)."""
+    air_damping: float = 0.2
+    """Linear air drag rate [1/s], mass proportional."""
+    gravity: tuple = (0.0, 0.0, -9.81)
+    """Gravity [m/s²]."""
+
+    def __post_init__(self) -> None:
+        _require(self.method in SOLVERS, f'method must be one of {SOLVERS}, got {self.method!r}')
+        _finite_positive('dt', self.dt)
+        _require(self.dt <= 0.1, f'dt must be <= 0.1 s, got {self.dt}')
+        for name, upper in (('substeps', 10000), ('jacobi_iterations', 100000),
+                            ('constraint_iterations', 10000)):
+            value = getattr(self, name)
+            _require(isinstance(value, int) and 0 <= value <= upper,
+                     f'{name} must be an integer in [0, {upper}], got {value!r}')
+        _require(self.substeps >= 1, 'substeps must be >= 1')
+        for name in ('max_stretch', 'max_compression'):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and 0 < value < 0.5,
+                     f'{name} must be in (0, 0.5), got {value!r}')
+        _finite_non_negative('air_damping', self.air_damping)
+        _require(len(self.gravity) == 3 and all(math.isfinite(g) for g in self.gravity),
+                 f'gravity must be three finite numbers, got {self.gravity!r}')
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Probes and the ground plane (SPEC §3)."""
+
+    ground_enabled: bool = False
+    ground_height: float = 0.0
+    """Height of the table [m]."""
+    ground_friction: float = 0.4
+    probe_friction: float = 0.6
+    max_probe_distance: float = 100.0
+    """Probe centres farther than this from the origin [m] are refused as absurd."""
+
+    def __post_init__(self) -> None:
+        _require(math.isfinite(self.ground_height), 'ground_height must be finite')
+        for name in ('ground_friction', 'probe_friction'):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and 0 <= value <= 10,
+                     f'{name} must be in [0, 10], got {value!r}')
+        _finite_positive('max_probe_distance', self.max_probe_distance)
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Everything the core needs to build and step a sheet."""
+
+    sheet: SheetConfig = field(default_factory=SheetConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.seed, int) and 0 <= self.seed < 2**63,
+                 f'seed must be a non-negative integer, got {self.seed!r}')
+
+
+def from_mapping(cls, values: dict):
+    """Build a config dataclass from a plain mapping, refusing unknown keys by name."""
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f'unknown {cls.__name__} keys: {", ".join(unknown)}')
+    converted = {}
+    for key, value in values.items():
+        if key == 'gravity':
+            value = tuple(float(g) for g in value)
+        converted[key] = value
+    return cls(**converted)

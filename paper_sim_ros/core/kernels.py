@@ -1,0 +1,339 @@
+"""numba kernels over flat arrays: spring forces and Jacobians, the Jacobi iteration of
+Eq. 6, stretch projection, contact. Inputs first, outputs last; no Python objects.
+
+Springs scatter into their two vertices, so every loop over springs runs serially (a
+``prange`` there would race); the per-vertex loops are independent.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+EPSILON_LENGTH = 1e-12
+
+
+@njit(cache=True)
+def spring_system(positions, velocities, spring_vertices, rest_length, stiffness, damping, h,
+                  force, diagonal, coupling, rhs_jv):
+    """Forces and the implicit-system pieces of every spring (Eq. 2–3, Baraff–Witkin blocks).
+
+    For a spring of unit direction d, length l, rest length l0:
+      S = k [ max(0, 1 - l0/l) (I - d dᵀ) + d dᵀ ]   (= -∂f_i/∂x_i, positive semi-definite)
+      C = c d dᵀ                                       (= -∂f_i/∂v_i)
+    The transverse term is clamped at zero for a compressed spring (l < l0), where it is
+    negative and would make W = M - h ∂f/∂v - h² ∂f/∂x indefinite; this is the usual
+    Baraff–Witkin remedy and only drops a destabilising term.
+    Adds to ``force`` (V,3); adds B = hC + h²S to ``diagonal`` (V,3,3) of both ends; writes
+    B, packed symmetric (xx, yy, zz, xy, xz, yz), to ``coupling`` (S,6); adds the h² J v term
+    of Eq. 3's right-hand side to ``rhs_jv`` (V,3).
+    """
+    h2 = h * h
+    for s in range(spring_vertices.shape[0]):
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length < EPSILON_LENGTH:
+            continue
+        ux = dx / length
+        uy = dy / length
+        uz = dz / length
+        k = stiffness[s]
+        c = damping[s]
+        dvx = velocities[j, 0] - velocities[i, 0]
+        dvy = velocities[j, 1] - velocities[i, 1]
+        dvz = velocities[j, 2] - velocities[i, 2]
+        # Hooke plus axial damping, acting on i towards j
+        magnitude = k * (length - rest_length[s]) + c * (dvx * ux + dvy * uy + dvz * uz)
+        force[i, 0] += magnitude * ux
+        force[i, 1] += magnitude * uy
+        force[i, 2] += magnitude * uz
+        force[j, 0] -= magnitude * ux
+        force[j, 1] -= magnitude * uy
+        force[j, 2] -= magnitude * uz
+        transverse = k * max(0.0, 1.0 - rest_length[s] / length)
+        axial = k - transverse
+        # S = transverse I + axial d dᵀ
+        sxx = transverse + axial * ux * ux
+        syy = transverse + axial * uy * uy
+        szz = transverse + axial * uz * uz
+        sxy = axial * ux * uy
+        sxz = axial * ux * uz
+        syz = axial * uy * uz
+        # h² S (v_j - v_i) on i, the opposite on j (Eq. 3's h² J v)
+        jx = h2 * (sxx * dvx + sxy * dvy + sxz * dvz)
+        jy = h2 * (sxy * dvx + syy * dvy + syz * dvz)
+        jz = h2 * (sxz * dvx + syz * dvy + szz * dvz)
+        rhs_jv[i, 0] += jx
+        rhs_jv[i, 1] += jy
+        rhs_jv[i, 2] += jz
+        rhs_jv[j, 0] -= jx
+        rhs_jv[j, 1] -= jy
+        rhs_jv[j, 2] -= jz
+        hc = h * c
+        bxx = h2 * sxx + hc * ux * ux
+        byy = h2 * syy + hc * uy * uy
+        bzz = h2 * szz + hc * uz * uz
+        bxy = h2 * sxy + hc * ux * uy
+        bxz = h2 * sxz + hc * ux * uz
+        byz = h2 * syz + hc * uy * uz
+        coupling[s, 0] = bxx
+        coupling[s, 1] = byy
+        coupling[s, 2] = bzz
+        coupling[s, 3] = bxy
+        coupling[s, 4] = bxz
+        coupling[s, 5] = byz
+        for v in (i, j):
+            diagonal[v, 0, 0] += bxx
+            diagonal[v, 1, 1] += byy
+            diagonal[v, 2, 2] += bzz
+            diagonal[v, 0, 1] += bxy
+            diagonal[v, 1, 0] += bxy
+            diagonal[v, 0, 2] += bxz
+            diagonal[v, 2, 0] += bxz
+            diagonal[v, 1, 2] += byz
+            diagonal[v, 2, 1] += byz
+
+
+@njit(cache=True)
+def invert_blocks(blocks, inverse):
+    """Invert every symmetric positive-definite 3×3 block (the W_ii of Eq. 5)."""
+    for v in range(blocks.shape[0]):
+        a = blocks[v]
+        c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+        c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+        c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+        det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+        inv_det = 1.0 / det
+        inverse[v, 0, 0] = c00 * inv_det
+        inverse[v, 1, 0] = c01 * inv_det
+        inverse[v, 2, 0] = c02 * inv_det
+        inverse[v, 0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * inv_det
+        inverse[v, 1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * inv_det
+        inverse[v, 2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * inv_det
+        inverse[v, 0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * inv_det
+        inverse[v, 1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * inv_det
+        inverse[v, 2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * inv_det
+
+
+@njit(cache=True)
+def jacobi_iterate(diagonal_inverse, coupling, spring_vertices, rhs, pinned, iterations,
+                   delta_v, neighbour_sum):
+    """Eq. 6: Δv_i ← W_ii⁻¹ (h f̃_i + h² Σ_j J_ij Δv_j), ``iterations`` times, from the
+    starting guess already in ``delta_v``. Pinned vertices are filtered to Δv = 0.
+    ``neighbour_sum`` (V,3) is scratch."""
+    vertex_count = rhs.shape[0]
+    for _ in range(iterations):
+        neighbour_sum[:, :] = 0.0
+        for s in range(spring_vertices.shape[0]):
+            i = spring_vertices[s, 0]
+            j = spring_vertices[s, 1]
+            bxx = coupling[s, 0]
+            byy = coupling[s, 1]
+            bzz = coupling[s, 2]
+            bxy = coupling[s, 3]
+            bxz = coupling[s, 4]
+            byz = coupling[s, 5]
+            # W_ij = -B, so -W_ij Δv_j = B Δv_j
+            neighbour_sum[i, 0] += bxx * delta_v[j, 0] + bxy * delta_v[j, 1] + bxz * delta_v[j, 2]
+            neighbour_sum[i, 1] += bxy * delta_v[j, 0] + byy * delta_v[j, 1] + byz * delta_v[j, 2]
+            neighbour_sum[i, 2] += bxz * delta_v[j, 0] + byz * delta_v[j, 1] + bzz * delta_v[j, 2]
+            neighbour_sum[j, 0] += bxx * delta_v[i, 0] + bxy * delta_v[i, 1] + bxz * delta_v[i, 2]
+            neighbour_sum[j, 1] += bxy * delta_v[i, 0] + byy * delta_v[i, 1] + byz * delta_v[i, 2]
+            neighbour_sum[j, 2] += bxz * delta_v[i, 0] + byz * delta_v[i, 1] + bzz * delta_v[i, 2]
+        for v in range(vertex_count):
+            if pinned[v]:
+                delta_v[v, 0] = 0.0
+                delta_v[v, 1] = 0.0
+                delta_v[v, 2] = 0.0
+                continue
+            bx = rhs[v, 0] + neighbour_sum[v, 0]
+            by = rhs[v, 1] + neighbour_sum[v, 1]
+            bz = rhs[v, 2] + neighbour_sum[v, 2]
+            w = diagonal_inverse[v]
+            delta_v[v, 0] = w[0, 0] * bx + w[0, 1] * by + w[0, 2] * bz
+            delta_v[v, 1] = w[1, 0] * bx + w[1, 1] * by + w[1, 2] * bz
+            delta_v[v, 2] = w[2, 0] * bx + w[2, 1] * by + w[2, 2] * bz
+
+
+@njit(cache=True)
+def project_springs(positions, inverse_mass, spring_vertices, rest_length, shortest, longest,
+                    reverse, vertex_level, shock):
+    """One Gauss–Seidel sweep of strain limiting (Provot): a spring longer than
+    ``longest`` × l0 or shorter than ``shortest`` × l0 is moved back to that bound, the
+    correction shared by inverse mass. ``reverse`` sweeps from the last spring, so that
+    alternating sweeps carry corrections both ways across the sheet.
+
+    With ``shock`` (shock propagation, Guendelman et al. 2003) the end nearer the pins
+    (lower ``vertex_level``) is treated as immovable, so a sweep in level order carries the
+    pins' hold to the far edge in one pass instead of diffusing it a row per sweep."""
+    count = spring_vertices.shape[0]
+    for n in range(count):
+        s = count - 1 - n if reverse else n
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        wi = inverse_mass[i]
+        wj = inverse_mass[j]
+        if shock:
+            if vertex_level[i] < vertex_level[j]:
+                wi = 0.0
+            elif vertex_level[j] < vertex_level[i]:
+                wj = 0.0
+        w = wi + wj
+        if w == 0.0:
+            continue
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length < EPSILON_LENGTH:
+            continue
+        upper = longest * rest_length[s]
+        lower = shortest * rest_length[s]
+        if length > upper:
+            target = upper
+        elif length < lower:
+            target = lower
+        else:
+            continue
+        scale = (length - target) / (length * w)
+        positions[i, 0] += wi * scale * dx
+        positions[i, 1] += wi * scale * dy
+        positions[i, 2] += wi * scale * dz
+        positions[j, 0] -= wj * scale * dx
+        positions[j, 1] -= wj * scale * dy
+        positions[j, 2] -= wj * scale * dz
+
+
+@njit(cache=True)
+def project_attachments(positions, attached_vertex, anchor_vertex, attachment_length):
+    """Long-range attachments (Kim et al. 2012): a vertex may be no farther from its
+    nearest pinned vertex than their distance on the flat sheet. One pass carries the
+    weight of the whole sheet to the pins, which local sweeps cannot do in few passes."""
+    for a in range(attached_vertex.shape[0]):
+        v = attached_vertex[a]
+        p = anchor_vertex[a]
+        dx = positions[v, 0] - positions[p, 0]
+        dy = positions[v, 1] - positions[p, 1]
+        dz = positions[v, 2] - positions[p, 2]
+        distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+        limit = attachment_length[a]
+        if distance > limit:
+            scale = limit / distance
+            positions[v, 0] = positions[p, 0] + dx * scale
+            positions[v, 1] = positions[p, 1] + dy * scale
+            positions[v, 2] = positions[p, 2] + dz * scale
+
+
+@njit(cache=True)
+def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center_motion,
+                        radius, friction, apply_friction):
+    """Move vertices inside a sphere to its surface; with ``apply_friction``, cancel (static)
+    or shorten (kinetic, Coulomb: by friction × depth) their tangential slip relative to
+    the sphere's own motion over the step."""
+    for v in range(positions.shape[0]):
+        if inverse_mass[v] == 0.0:
+            continue
+        dx = positions[v, 0] - center[0]
+        dy = positions[v, 1] - center[1]
+        dz = positions[v, 2] - center[2]
+        distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if distance >= radius:
+            continue
+        if distance < EPSILON_LENGTH:
+            # dead centre: leave along +z, the sheet's rest normal
+            nx, ny, nz = 0.0, 0.0, 1.0
+        else:
+            nx, ny, nz = dx / distance, dy / distance, dz / distance
+        depth = radius - distance
+        positions[v, 0] += depth * nx
+        positions[v, 1] += depth * ny
+        positions[v, 2] += depth * nz
+        if apply_friction and friction > 0.0:
+            sx = positions[v, 0] - start_positions[v, 0] - center_motion[0]
+            sy = positions[v, 1] - start_positions[v, 1] - center_motion[1]
+            sz = positions[v, 2] - start_positions[v, 2] - center_motion[2]
+            normal_slip = sx * nx + sy * ny + sz * nz
+            tx = sx - normal_slip * nx
+            ty = sy - normal_slip * ny
+            tz = sz - normal_slip * nz
+            slip = np.sqrt(tx * tx + ty * ty + tz * tz)
+            if slip > 0.0:
+                keep = max(0.0, 1.0 - friction * depth / slip)
+                positions[v, 0] -= (1.0 - keep) * tx
+                positions[v, 1] -= (1.0 - keep) * ty
+                positions[v, 2] -= (1.0 - keep) * tz
+
+
+@njit(cache=True)
+def project_ground(positions, start_positions, inverse_mass, ground_height, friction,
+                   apply_friction):
+    """Keep vertices above the table plane z = ground_height, with Coulomb friction."""
+    for v in range(positions.shape[0]):
+        if inverse_mass[v] == 0.0 or positions[v, 2] >= ground_height:
+            continue
+        depth = ground_height - positions[v, 2]
+        positions[v, 2] = ground_height
+        if apply_friction and friction > 0.0:
+            tx = positions[v, 0] - start_positions[v, 0]
+            ty = positions[v, 1] - start_positions[v, 1]
+            slip = np.sqrt(tx * tx + ty * ty)
+            if slip > 0.0:
+                keep = max(0.0, 1.0 - friction * depth / slip)
+                positions[v, 0] = start_positions[v, 0] + keep * tx
+                positions[v, 1] = start_positions[v, 1] + keep * ty
+
+
+@njit(cache=True)
+def project_probes(positions, start_positions, inverse_mass, probe_start, probe_end,
+                   probe_radius, probe_active, friction, sweep):
+    """Push vertices out of every active probe. With ``sweep`` the probe is swept from its
+    start to its end centre in moves of at most a quarter radius, so that a probe faster
+    than one radius per step pushes the sheet along instead of tunnelling through it;
+    friction acts on the final position only."""
+    motion = np.empty(3)
+    center = np.empty(3)
+    for p in range(probe_radius.shape[0]):
+        if not probe_active[p]:
+            continue
+        radius = probe_radius[p]
+        for k in range(3):
+            motion[k] = probe_end[p, k] - probe_start[p, k]
+        travel = np.sqrt(motion[0] ** 2 + motion[1] ** 2 + motion[2] ** 2)
+        moves = 1
+        if sweep:
+            moves = max(1, int(np.ceil(travel / (0.25 * radius))))
+        for m in range(1, moves + 1):
+            fraction = m / moves
+            for k in range(3):
+                center[k] = probe_start[p, k] + fraction * motion[k]
+            _push_out_of_sphere(positions, start_positions, inverse_mass, center, motion,
+                                radius, friction, sweep and m == moves)
+
+
+@njit(cache=True)
+def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
+    """Largest |l/l0 - 1| over the springs of one kind."""
+    largest = 0.0
+    for s in range(spring_vertices.shape[0]):
+        if spring_kind[s] != kind:
+            continue
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        strain = abs(np.sqrt(dx * dx + dy * dy + dz * dz) / rest_length[s] - 1.0)
+        if strain > largest:
+            largest = strain
+    return largest
+
+
+@njit(cache=True)
+def all_finite(values):
+    for x in values.ravel():
+        if not np.isfinite(x):
+            return False
+    return True

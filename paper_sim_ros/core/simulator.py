@@ -1,0 +1,290 @@
+"""Steps a sheet: probes in, one frame of physics, state out (SPEC §2–3).
+
+One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps. Each sub-step:
+  # forces and Jacobians   spring_system()
+  # implicit velocity step Eq. 6 Jacobi (or explicit Euler, for comparison)
+  # predict positions      x* = x + h v
+  # contact                probes (swept) and table, with friction
+  # stretch                'constrained' only: Gauss–Seidel strain limiting + attachments
+  # velocities             v = (x - x_start) / h, so every projection is velocity-consistent
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import kernels
+from .config import SimulationConfig
+import os
+SHOCK=os.environ.get('SHOCK')=='1'
+from .sheet import AUX, BEND, HINGE, Sheet, build_flat_sheet
+
+
+@dataclass
+class Probes:
+    """Sphere probes. Centres in m; ``start`` is where each was at the frame's start."""
+
+    radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    start: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    end: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+    @property
+    def count(self) -> int:
+        return int(self.radius.shape[0])
+
+
+class Simulator:
+    """The paper sheet and its time stepping. Knows nothing of ROS or Rerun."""
+
+    def __init__(self, config: SimulationConfig, initial_sheet: Sheet | None = None) -> None:
+        self.config = config
+        self.initial_sheet = initial_sheet if initial_sheet is not None \
+            else build_flat_sheet(config.sheet)
+        self.reset()
+
+    # ----------------------------------------------------------------- state management
+    def reset(self) -> None:
+        """Back to the initial sheet, time zero, no probes."""
+        self.sheet = self.initial_sheet.copy()
+        self.time = 0.0
+        self.frame = 0
+        self.nan_seen = False
+        self.probes = Probes()
+        self.topology_changed()
+
+    def set_pinned(self, pinned: np.ndarray) -> None:
+        """Pin (fix in place) the vertices where ``pinned`` is true."""
+        pinned = np.asarray(pinned, dtype=bool)
+        if pinned.shape != (self.sheet.vertex_count,):
+            raise ValueError(f'pinned must have shape ({self.sheet.vertex_count},)')
+        self.sheet.pinned = pinned.copy()
+        self.sheet.velocities[pinned] = 0.0
+        if self.frame == 0:
+            self.initial_sheet.pinned = pinned.copy()
+        self.topology_changed()
+
+    def set_probes(self, centers: np.ndarray, radii: np.ndarray, active: np.ndarray) -> None:
+        """Where the probes are to be at the end of the next frame. A probe that was
+        inactive starts there; an active one sweeps there from where it was."""
+        centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+        radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        active = np.asarray(active, dtype=bool).reshape(-1)
+        if not (len(centers) == len(radii) == len(active)):
+            raise ValueError('centers, radii and active must have the same length')
+        limit = self.config.contact.max_probe_distance
+        usable = active & np.all(np.isfinite(centers), axis=1) \
+            & (np.linalg.norm(np.nan_to_num(centers), axis=1) <= limit)
+        if np.any(active & ~usable):
+            raise ValueError(f'probe centre not finite or farther than {limit} m from origin')
+        if np.any(~np.isfinite(radii)) or np.any(radii <= 0):
+            raise ValueError('probe radii must be finite and > 0')
+        start = centers.copy()
+        if self.probes.count == len(centers):
+            keep = self.probes.active & active
+            start[keep] = self.probes.end[keep]
+        self.probes = Probes(radius=radii.copy(), start=start, end=centers.copy(),
+                             active=active.copy())
+
+    def topology_changed(self) -> None:
+        """Rebuild what is derived from the mesh: the spring subsets each solver uses,
+        the inverse masses and the long-range attachments to pinned vertices."""
+        sheet = self.sheet
+        method = self.config.solver.method
+        kind = sheet.spring_kind
+        if method == 'constrained':
+            force_mask = kind == BEND
+            constraint_springs = np.flatnonzero((kind == HINGE) | (kind == AUX))
+        else:
+            force_mask = np.ones(sheet.spring_count, dtype=bool)
+            constraint_springs = np.zeros(0, dtype=np.int64)
+        self._force_springs = np.flatnonzero(force_mask)
+        self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
+        ends = sheet.spring_vertices[constraint_springs]
+        self._vertex_level = pin_distance_levels(ends, sheet.pinned)
+        # sweep from the pins outwards (level order), so shock propagation can work
+        level = self._vertex_level[ends]
+        order = np.lexsort((level.max(axis=1), level.min(axis=1)))
+        self._constraint_springs = constraint_springs[order]
+        self._build_attachments()
+
+    def _build_attachments(self) -> None:
+        sheet = self.sheet
+        anchors = np.flatnonzero(sheet.pinned)
+        free = np.flatnonzero(~sheet.pinned)
+        if self.config.solver.method != 'constrained' or anchors.size == 0:
+            self._attached = np.zeros(0, dtype=np.int64)
+            self._anchor = np.zeros(0, dtype=np.int64)
+            self._attachment_length = np.zeros(0)
+            return
+        nearest = np.empty(free.size, dtype=np.int64)
+        distance = np.empty(free.size)
+        anchor_material = sheet.material[anchors]
+        for start in range(0, free.size, 4096):
+            chunk = free[start:start + 4096]
+            gap = np.linalg.norm(sheet.material[chunk, None, :] - anchor_material[None], axis=2)
+            best = np.argmin(gap, axis=1)
+            nearest[start:start + 4096] = anchors[best]
+            distance[start:start + 4096] = gap[np.arange(chunk.size), best]
+        self._attached = free
+        self._anchor = nearest
+        self._attachment_length = distance * (1.0 + self.config.solver.max_stretch)
+
+    # ----------------------------------------------------------------------- stepping
+    def step_frame(self) -> None:
+        """Advance one frame of ``dt``. If the state ever turned non-finite the frame is
+        rolled back, velocities zeroed and ``nan_seen`` set: nothing non-finite escapes."""
+        solver = self.config.solver
+        substeps = solver.substeps
+        h = solver.dt / substeps
+        saved_positions = self.sheet.positions.copy()
+        probe_path = self.probes.end - self.probes.start
+        for sub in range(substeps):
+            probe_from = self.probes.start + probe_path * (sub / substeps)
+            probe_to = self.probes.start + probe_path * ((sub + 1) / substeps)
+            self._substep(h, probe_from, probe_to)
+        if not (kernels.all_finite(self.sheet.positions)
+                and kernels.all_finite(self.sheet.velocities)):
+            self.nan_seen = True
+            self.sheet.positions[:] = saved_positions
+            self.sheet.velocities[:] = 0.0
+        self.probes.start = self.probes.end.copy()
+        self.time += solver.dt
+        self.frame += 1
+
+    def _substep(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray) -> None:
+        sheet = self.sheet
+        solver = self.config.solver
+        contact = self.config.contact
+        positions, velocities = sheet.positions, sheet.velocities
+        mass = sheet.vertex_mass
+        start_positions = positions.copy()
+        force_springs = self._force_springs
+        springs = sheet.spring_vertices[force_springs]
+        gravity = np.asarray(solver.gravity)
+
+        # forces and Jacobians
+        vertex_count = sheet.vertex_count
+        external_force = mass[:, None] * (gravity[None, :] - solver.air_damping * velocities)
+        force = external_force.copy()
+        diagonal = np.zeros((vertex_count, 3, 3))
+        coupling = np.zeros((springs.shape[0], 6))
+        rhs_jv = np.zeros((vertex_count, 3))
+        kernels.spring_system(positions, velocities, springs,
+                              sheet.spring_rest_length[force_springs],
+                              sheet.spring_stiffness[force_springs],
+                              sheet.spring_damping[force_springs], h,
+                              force, diagonal, coupling, rhs_jv)
+
+        if solver.method == 'explicit':
+            delta_v = h * force / mass[:, None]
+            delta_v[sheet.pinned] = 0.0
+        else:
+            # W_ii = m_i (1 + h·air) I + Σ B  (air drag taken implicitly too)
+            diagonal[:, 0, 0] += mass * (1.0 + h * solver.air_damping)
+            diagonal[:, 1, 1] += mass * (1.0 + h * solver.air_damping)
+            diagonal[:, 2, 2] += mass * (1.0 + h * solver.air_damping)
+            diagonal_inverse = np.empty_like(diagonal)
+            kernels.invert_blocks(diagonal, diagonal_inverse)
+            rhs = h * force + rhs_jv
+            if solver.method == 'paper':
+                # Eq. 6, k = 0: Δv⁽⁰⁾ = W_ii⁻¹ h f̃
+                delta_v = np.einsum('vab,vb->va', diagonal_inverse, rhs)
+            else:
+                # start from the velocity change of the external forces alone (gravity, air):
+                # exact for rigid motion, which Eq. 6's start W_ii⁻¹ h f̃ slows by the
+                # factor m / W_ii (~1/500 for paper); Jacobi then adds what springs do
+                delta_v = h * external_force / mass[:, None]
+            delta_v[sheet.pinned] = 0.0
+            kernels.jacobi_iterate(diagonal_inverse, coupling, springs, rhs, sheet.pinned,
+                                   solver.jacobi_iterations, delta_v, np.empty_like(delta_v))
+        velocities += delta_v
+        velocities[sheet.pinned] = 0.0
+        positions += h * velocities
+
+        # contact (swept probes, then the table), with friction
+        ground = contact.ground_enabled
+        inverse_mass = self._inverse_mass
+        self._contact(positions, start_positions, probe_from, probe_to, True)
+
+        # stretch: strain limiting, attachments, and contact kept satisfied alongside
+        if self._constraint_springs.size:
+            constraint_springs = self._constraint_springs
+            ends = sheet.spring_vertices[constraint_springs]
+            rest = sheet.spring_rest_length[constraint_springs]
+            shortest = 1.0 - solver.max_compression
+            longest = 1.0 + solver.max_stretch
+            level = self._vertex_level
+            for iteration in range(solver.constraint_iterations):
+                for reverse in (False, True):
+                    kernels.project_springs(positions, inverse_mass, ends, rest,
+                                            shortest, longest, reverse, level, False)
+                kernels.project_attachments(positions, self._attached, self._anchor,
+                                            self._attachment_length)
+                if self.probes.count or ground:
+                    self._contact(positions, start_positions, probe_from, probe_to, False)
+            if self._attached.size and SHOCK:
+                kernels.project_springs(positions, inverse_mass, ends, rest,
+                                        shortest, longest, False, level, True)
+
+        # velocities from the positions actually reached
+        velocities[:] = (positions - start_positions) / h
+        velocities[sheet.pinned] = 0.0
+
+    def _contact(self, positions, start_positions, probe_from, probe_to, with_friction):
+        contact = self.config.contact
+        if self.probes.count:
+            kernels.project_probes(positions, start_positions, self._inverse_mass,
+                                   probe_from, probe_to, self.probes.radius,
+                                   self.probes.active, contact.probe_friction, with_friction)
+        if contact.ground_enabled:
+            kernels.project_ground(positions, start_positions, self._inverse_mass,
+                                   contact.ground_height, contact.ground_friction,
+                                   with_friction)
+
+    # ------------------------------------------------------------------------ metrics
+    def max_strain(self) -> float:
+        """Largest |l/l0 - 1| over HINGE springs now."""
+        sheet = self.sheet
+        return float(kernels.max_abs_strain(sheet.positions, sheet.spring_vertices,
+                                            sheet.spring_rest_length, sheet.spring_kind, HINGE))
+
+    def energy(self) -> float:
+        """Kinetic + gravitational + elastic energy [J]."""
+        sheet = self.sheet
+        gravity = np.asarray(self.config.solver.gravity)
+        kinetic = 0.5 * np.sum(sheet.vertex_mass * np.sum(sheet.velocities ** 2, axis=1))
+        potential = -np.sum(sheet.vertex_mass * (sheet.positions @ gravity))
+        ends = sheet.spring_vertices
+        length = np.linalg.norm(sheet.positions[ends[:, 1]] - sheet.positions[ends[:, 0]], axis=1)
+        elastic = 0.5 * np.sum(sheet.spring_stiffness * (length - sheet.spring_rest_length) ** 2)
+        return float(kinetic + potential + elastic)
+
+    def max_probe_penetration(self) -> float:
+        """Deepest any vertex sits inside an active probe now [m] (0 when none)."""
+        deepest = 0.0
+        for p in np.flatnonzero(self.probes.active):
+            distance = np.linalg.norm(self.sheet.positions - self.probes.end[p], axis=1)
+            deepest = max(deepest, float(np.max(self.probes.radius[p] - distance)))
+        return deepest
+
+
+def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.ndarray:
+    """Breadth-first hop count of every vertex from the nearest pinned vertex along the
+    springs (0 at pins; vertex count + 1 where unreachable, or everywhere without pins)."""
+    vertex_count = pinned.shape[0]
+    unreached = vertex_count + 1
+    level = np.where(pinned, 0, unreached).astype(np.int64)
+    if spring_vertices.size == 0:
+        return level
+    first, second = spring_vertices[:, 0], spring_vertices[:, 1]
+    current = 0
+    while True:
+        reached_first = (level[first] == current) & (level[second] == unreached)
+        reached_second = (level[second] == current) & (level[first] == unreached)
+        frontier = np.concatenate([second[reached_first], first[reached_second]])
+        if frontier.size == 0:
+            return level
+        current += 1
+        level[frontier] = current

@@ -1,0 +1,102 @@
+"""Triangle-mesh topology: edges, their opposite vertices, and validity checks (SPEC §4.4).
+
+Pure numpy; used when a sheet is built and whenever damage changes the mesh.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+NO_VERTEX = -1
+"""Marks the missing opposite vertex of a border edge (topology tables only, never kernels)."""
+
+
+def edge_key(first: np.ndarray, second: np.ndarray, vertex_count: int) -> np.ndarray:
+    """An order-independent integer key per undirected edge."""
+    low = np.minimum(first, second).astype(np.int64)
+    high = np.maximum(first, second).astype(np.int64)
+    return low * vertex_count + high
+
+
+def mesh_edges(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges of a triangle mesh and their opposite vertices.
+
+    Returns ``edges`` (E, 2) int32 with ``edges[:, 0] < edges[:, 1]`` and ``opposite``
+    (E, 2) int32: the vertex opposite the edge in its first and second triangle,
+    ``NO_VERTEX`` in the second column for a border edge. Raises ``ValueError`` if an
+    edge has more than two triangles (non-manifold).
+    """
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    first = np.concatenate([a, b, c])
+    second = np.concatenate([b, c, a])
+    across = np.concatenate([c, a, b])
+    keys = edge_key(first, second, vertex_count)
+    order = np.argsort(keys, kind='stable')
+    keys_sorted = keys[order]
+    unique_keys, starts, counts = np.unique(keys_sorted, return_index=True, return_counts=True)
+    if counts.size and counts.max() > 2:
+        raise ValueError('non-manifold mesh: an edge has more than two triangles')
+    edges = np.empty((unique_keys.size, 2), dtype=np.int32)
+    edges[:, 0] = unique_keys // vertex_count
+    edges[:, 1] = unique_keys % vertex_count
+    opposite = np.full((unique_keys.size, 2), NO_VERTEX, dtype=np.int32)
+    opposite[:, 0] = across[order[starts]]
+    interior = counts == 2
+    opposite[interior, 1] = across[order[starts[interior] + 1]]
+    return edges, opposite
+
+
+def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (unit +z where a vertex has no area)."""
+    corner = positions[triangles]
+    face = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
+    normals = np.zeros_like(positions)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    length = np.linalg.norm(normals, axis=1)
+    flat = length < 1e-30
+    normals[flat] = (0.0, 0.0, 1.0)
+    length[flat] = 1.0
+    return normals / length[:, None]
+
+
+def check_mesh(triangles: np.ndarray, vertex_count: int, positions: np.ndarray,
+               spring_vertices: np.ndarray, min_area: float = 1e-14) -> list[str]:
+    """Every SPEC §4.4 invariant that fails, as readable sentences (empty list: valid).
+
+    Checks: indices in range, no repeated corner, every edge in at most two triangles,
+    consistent orientation (each interior edge traversed once in each direction),
+    every triangle edge is a spring, no degenerate (near-zero-area) triangle, every
+    vertex used by a triangle.
+    """
+    problems: list[str] = []
+    if triangles.size == 0:
+        return ['mesh has no triangles']
+    if triangles.min() < 0 or triangles.max() >= vertex_count:
+        return ['triangle index out of range']
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    if np.any((a == b) | (b == c) | (c == a)):
+        problems.append('a triangle repeats a vertex')
+    directed = np.concatenate([a, b, c]).astype(np.int64) * vertex_count \
+        + np.concatenate([b, c, a]).astype(np.int64)
+    if np.unique(directed).size != directed.size:
+        problems.append('inconsistent orientation: a directed edge appears twice')
+    try:
+        edges, _ = mesh_edges(triangles, vertex_count)
+    except ValueError as error:
+        problems.append(str(error))
+        edges = np.empty((0, 2), dtype=np.int32)
+    spring_keys = np.unique(edge_key(spring_vertices[:, 0], spring_vertices[:, 1], vertex_count))
+    triangle_edge_keys = edge_key(edges[:, 0], edges[:, 1], vertex_count)
+    missing = ~np.isin(triangle_edge_keys, spring_keys)
+    if np.any(missing):
+        problems.append(f'{int(missing.sum())} triangle edges have no spring')
+    corner = positions[triangles]
+    area = 0.5 * np.linalg.norm(
+        np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]), axis=1)
+    if np.any(~np.isfinite(area)) or np.any(area < min_area):
+        problems.append(f'{int(np.sum(~(area >= min_area)))} degenerate triangles')
+    used = np.zeros(vertex_count, dtype=bool)
+    used[triangles.ravel()] = True
+    if not used.all():
+        problems.append(f'{int((~used).sum())} vertices belong to no triangle')
+    return problems

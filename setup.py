@@ -1,0 +1,31 @@
+from glob import glob
+
+from setuptools import setup
+
+package_name = 'paper_sim_ros'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=[package_name, f'{package_name}.core', f'{package_name}.msg_adapters'],
+    # msg_adapters/ sits at the top level of the repository but installs inside our namespace
+    package_dir={f'{package_name}.msg_adapters': 'msg_adapters'},
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{package_name}']),
+        (f'share/{package_name}', ['package.xml']),
+        (f'share/{package_name}/config', glob('config/*.yaml') + glob('config/*.rviz')),
+        (f'share/{package_name}/launch', glob('launch/*.py')),
+    ],
+    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml'],
+    zip_safe=True,
+    maintainer='paper_sim_ros developers',
+    maintainer_email='dev@paper-sim-ros.invalid',
+    description='Interactive simulation of folded paper for ROS 2 robot stacks.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'paper_sim_headless = paper_sim_ros.headless:main',
+        ],
+    },
+)
