@@ -1,0 +1,179 @@
+"""Scenarios as data: a sheet, a solver, contact, pins and probe tracks over time.
+
+A scenario is a plain mapping (the same shape as a scenario YAML file), so built-in
+scenarios, user files and recorded sessions all go through one loader:
+
+    name: press
+    description: a fingertip presses the centre of a sheet lying on a table
+    duration: 3.0            # s
+    seed: 0
+    pin: none                # none | short_edge (the edge at y = -height/2)
+    sheet: {nx: 65, ny: 65}  # any SheetConfig field
+    solver: {dt: 0.0166667}  # any SolverConfig field
+    contact: {ground_enabled: true}
+    probes:
+      - name: finger
+        radius: 0.01         # m
+        keyframes: [[0.0, 0.0, 0.0, 0.05], [1.0, 0.0, 0.0, 0.011]]   # [t, x, y, z]
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+import math
+from typing import Any
+
+import numpy as np
+
+from .config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig, from_mapping
+from .sheet import Sheet
+
+PIN_MODES = ('none', 'short_edge')
+
+BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
+    'hanging': {
+        'description': 'A4 sheet pinned along one short edge, released flat and horizontal, '
+                       'swings down under gravity (a cantilever: bending and stretch).',
+        'duration': 10.0,
+        'pin': 'short_edge',
+        'sheet': {'elevation': 0.5},
+        'contact': {'ground_enabled': False},
+    },
+    'press': {
+        'description': 'A4 sheet flat on a table; a 1 cm probe descends on its centre, '
+                       'presses it 1 mm into the table surface, and lifts off.',
+        'duration': 3.0,
+        'contact': {'ground_enabled': True},
+        'probes': [{
+            'name': 'finger',
+            'radius': 0.01,
+            'keyframes': [[0.0, 0.0, 0.0, 0.05], [1.0, 0.0, 0.0, 0.009],
+                          [1.5, 0.0, 0.0, 0.009], [2.5, 0.0, 0.0, 0.05]],
+        }],
+    },
+}
+
+
+@dataclass(frozen=True)
+class ProbeTrack:
+    """A sphere probe moving through keyframes; active from its first to its last one."""
+
+    name: str
+    radius: float
+    keyframes: np.ndarray
+    """(K, 4) float64: t [s], x, y, z [m], times strictly increasing."""
+
+    def center_at(self, time: float) -> tuple[np.ndarray, bool]:
+        """Linearly interpolated centre at ``time`` and whether the probe is active."""
+        times = self.keyframes[:, 0]
+        active = bool(times[0] <= time <= times[-1])
+        center = np.array([np.interp(time, times, self.keyframes[:, k]) for k in (1, 2, 3)])
+        return center, active
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    duration: float
+    pin: str
+    config: SimulationConfig
+    probes: tuple[ProbeTrack, ...]
+    mapping: dict
+    """The mapping this scenario was built from (recorded so a session can be re-run)."""
+
+    @property
+    def frame_count(self) -> int:
+        return int(round(self.duration / self.config.solver.dt))
+
+    def pinned_mask(self, sheet: Sheet) -> np.ndarray:
+        if self.pin == 'short_edge':
+            edge = sheet.material[:, 1].min()
+            return np.isclose(sheet.material[:, 1], edge, rtol=0.0, atol=1e-9)
+        return np.zeros(sheet.vertex_count, dtype=bool)
+
+    def probe_inputs(self, time: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centres (P,3), radii (P,) and active flags (P,) of every probe at ``time``."""
+        centers = np.zeros((len(self.probes), 3))
+        active = np.zeros(len(self.probes), dtype=bool)
+        for index, probe in enumerate(self.probes):
+            centers[index], active[index] = probe.center_at(time)
+        radii = np.array([probe.radius for probe in self.probes], dtype=np.float64)
+        return centers, radii, active
+
+
+def _probe_from_mapping(values: dict) -> ProbeTrack:
+    unknown = sorted(set(values) - {'name', 'radius', 'keyframes'})
+    if unknown:
+        raise ValueError(f'unknown probe keys: {", ".join(unknown)}')
+    name = str(values.get('name', 'probe'))
+    radius = float(values['radius'])
+    if not (math.isfinite(radius) and 0 < radius <= 1.0):
+        raise ValueError(f'probe {name}: radius must be in (0, 1] m, got {radius}')
+    keyframes = np.asarray(values['keyframes'], dtype=np.float64)
+    if keyframes.ndim != 2 or keyframes.shape[1] != 4 or len(keyframes) < 1:
+        raise ValueError(f'probe {name}: keyframes must be a list of [t, x, y, z]')
+    if not np.all(np.isfinite(keyframes)):
+        raise ValueError(f'probe {name}: keyframes must be finite')
+    if np.any(np.diff(keyframes[:, 0]) <= 0):
+        raise ValueError(f'probe {name}: keyframe times must increase')
+    return ProbeTrack(name=name, radius=radius, keyframes=keyframes)
+
+
+def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
+    """Build and validate a scenario; raises ValueError naming what is wrong."""
+    if not isinstance(mapping, dict):
+        raise ValueError('a scenario must be a mapping')
+    known = {'name', 'description', 'duration', 'seed', 'pin', 'sheet', 'solver', 'contact',
+             'probes'}
+    unknown = sorted(set(mapping) - known)
+    if unknown:
+        raise ValueError(f'unknown scenario keys: {", ".join(unknown)}')
+    duration = float(mapping.get('duration', 5.0))
+    if not (math.isfinite(duration) and 0 < duration <= 3600):
+        raise ValueError(f'duration must be in (0, 3600] s, got {duration}')
+    pin = mapping.get('pin', 'none')
+    if pin not in PIN_MODES:
+        raise ValueError(f'pin must be one of {PIN_MODES}, got {pin!r}')
+    config = SimulationConfig(
+        sheet=from_mapping(SheetConfig, mapping.get('sheet') or {}),
+        solver=from_mapping(SolverConfig, mapping.get('solver') or {}),
+        contact=from_mapping(ContactConfig, mapping.get('contact') or {}),
+        seed=int(mapping.get('seed', 0)),
+    )
+    probes = tuple(_probe_from_mapping(p) for p in mapping.get('probes') or [])
+    return Scenario(name=str(mapping.get('name', name)),
+                    description=str(mapping.get('description', '')),
+                    duration=duration, pin=pin, config=config, probes=probes,
+                    mapping=copy.deepcopy(mapping))
+
+
+def builtin_mapping(name: str) -> dict:
+    if name not in BUILTIN_SCENARIOS:
+        raise ValueError(f'unknown scenario {name!r}; built-in: {", ".join(BUILTIN_SCENARIOS)}')
+    mapping = copy.deepcopy(BUILTIN_SCENARIOS[name])
+    mapping['name'] = name
+    return mapping
+
+
+def with_overrides(mapping: dict, grid: int | None = None, duration: float | None = None,
+                   dt: float | None = None, substeps: int | None = None,
+                   seed: int | None = None, method: str | None = None) -> dict:
+    """A copy of ``mapping`` with the command-line overrides applied."""
+    mapping = copy.deepcopy(mapping)
+    sheet = dict(mapping.get('sheet') or {})
+    solver = dict(mapping.get('solver') or {})
+    if grid is not None:
+        sheet['nx'] = sheet['ny'] = grid
+    if dt is not None:
+        solver['dt'] = dt
+    if substeps is not None:
+        solver['substeps'] = substeps
+    if method is not None:
+        solver['method'] = method
+    if duration is not None:
+        mapping['duration'] = duration
+    if seed is not None:
+        mapping['seed'] = seed
+    mapping['sheet'], mapping['solver'] = sheet, solver
+    return mapping
