@@ -1,0 +1,399 @@
+"""Record a simulation session to Rerun (SPEC §8): one explicit recording stream per session.
+
+Entity hierarchy (everything under ``/paper``):
+
+    paper/info                 static: the recording info (scenario, every parameter, seed) as
+                               JSON (``recording_info_json``, ``parameters_json``) and as a
+                               readable TextDocument
+    paper/mesh                 Mesh3D: positions + normals every frame; triangle indices and
+                               texture coordinates only on frames where the mesh changed (damage);
+                               the paper texture once, static
+    paper/springs/hinge        LineStrips3D of HINGE springs (every ``hinge_every`` frames)
+    paper/springs/aux          LineStrips3D of AUX springs (damage memory), every frame
+    paper/probes               Points3D of the active probes, with their radii
+    paper/inputs/probes        the probe inputs of each frame, exactly (float64 centres, radii,
+                               active flags) — what ``rerun_replay`` drives a new run with
+    paper/metrics/<name>       Scalars: step_time, real_time_factor, energy, max_strain, breaks,
+                               folds, vertices (and any other scalar the caller passes)
+
+Timelines: ``sim_time`` (duration, seconds of simulated time) and ``frame`` (the simulator's
+frame counter). Imports go one way: this module reads the core, the core never imports rerun.
+"""
+from __future__ import annotations
+
+import atexit
+import dataclasses
+import datetime
+import functools
+import json
+import math
+import os
+import threading
+import uuid
+import weakref
+from typing import Any
+
+import numpy as np
+
+from .core.sheet import AUX, HINGE
+from .core.topology import vertex_normals
+
+ENTITY_INFO = 'paper/info'
+ENTITY_MESH = 'paper/mesh'
+ENTITY_SPRINGS = {HINGE: 'paper/springs/hinge', AUX: 'paper/springs/aux'}
+ENTITY_PROBES = 'paper/probes'
+ENTITY_PROBE_INPUTS = 'paper/inputs/probes'
+ENTITY_METRICS = 'paper/metrics'
+TIMELINE = 'sim_time'
+FRAME_TIMELINE = 'frame'
+INFO_COMPONENT = 'recording_info_json'
+PARAMETERS_COMPONENT = 'parameters_json'
+METRIC_NAMES = ('step_time', 'real_time_factor', 'energy', 'max_strain', 'breaks', 'folds',
+                'vertices')
+SPRING_COLORS = {HINGE: (90, 110, 140), AUX: (220, 40, 40)}
+PROBE_COLOR = (40, 160, 255)
+PAPER_GREY = np.array([236.0, 233.0, 224.0])
+"""Colour of the sheet when no appearance module is available (slightly warm white)."""
+
+
+def _jsonable(value: Any) -> Any:
+    """Plain JSON types for dataclasses, numpy scalars/arrays, tuples and paths."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return _jsonable(dataclasses.asdict(value))
+    if isinstance(value, dict):
+        return {str(key): _jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(item) for item in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    return str(value)
+
+
+def check_writable_rrd(path: str | os.PathLike) -> str:
+    """Absolute path of a ``.rrd`` file that can be created here, or a clear error.
+
+    Raises ``ValueError`` for a path that is not an ``.rrd`` file name or is a directory, and
+    ``OSError`` (naming the path and the reason) when the file cannot be created. The file is
+    created (truncated) by the check itself, so nothing else can fail later at start-up.
+    """
+    text = os.fspath(path)
+    if not text:
+        raise ValueError('Rerun recording path is empty')
+    absolute = os.path.abspath(os.path.expanduser(text))
+    if os.path.isdir(absolute):
+        raise ValueError(f'Rerun recording path {absolute} is a directory, not an .rrd file')
+    if not absolute.endswith('.rrd'):
+        raise ValueError(f'Rerun recording path {absolute} must end in .rrd')
+    directory = os.path.dirname(absolute)
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(2, f'cannot write Rerun recording {absolute}: '
+                                   f'directory {directory} does not exist', absolute)
+    try:
+        with open(absolute, 'wb'):
+            pass
+    except OSError as error:
+        raise OSError(error.errno, f'cannot write Rerun recording {absolute}: '
+                                   f'{error.strerror}', absolute) from error
+    return absolute
+
+
+def _shaded_grey(normals: np.ndarray) -> np.ndarray:
+    """(V, 3) uint8: a warm white lit by a fixed light from above (two-sided, Lambert)."""
+    light = np.array([0.3, -0.4, 0.866])
+    lambert = np.abs(normals @ light)
+    return np.clip(PAPER_GREY[None, :] * (0.55 + 0.45 * lambert[:, None]), 0, 255) \
+        .astype(np.uint8)
+
+
+def _segments(positions: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """(S, 2, 3) float32 line segments of the springs ``ends`` (S, 2)."""
+    return positions[ends].astype(np.float32)
+
+
+def default_blueprint():
+    """A 3D view of the sheet beside the metric plots and the session info."""
+    import rerun.blueprint as rrb
+
+    def plot(name: str, *entities: str):
+        return rrb.TimeSeriesView(name=name, origin=f'/{ENTITY_METRICS}',
+                                  contents=[f'/{ENTITY_METRICS}/{e}' for e in entities])
+
+    view_3d = rrb.Spatial3DView(
+        name='sheet', origin='/paper',
+        contents=['+ /paper/mesh', '+ /paper/springs/**', '+ /paper/probes'],
+        eye_controls=rrb.EyeControls3D(position=(0.25, -0.35, 0.3), look_target=(0.0, 0.0, 0.0),
+                                       eye_up=(0.0, 0.0, 1.0)))
+    plots = rrb.Grid(
+        plot('step time [s]', 'step_time'),
+        plot('real-time factor', 'real_time_factor'),
+        plot('energy [J]', 'energy'),
+        plot('max strain', 'max_strain'),
+        plot('breaks, folds', 'breaks', 'folds'),
+        plot('vertices', 'vertices'),
+        grid_columns=2)
+    info = rrb.TextDocumentView(name='session', origin=f'/{ENTITY_INFO}')
+    return rrb.Blueprint(
+        rrb.Horizontal(view_3d, rrb.Vertical(plots, info, row_shares=[3, 1]),
+                       column_shares=[3, 2]),
+        rrb.TimePanel(timeline=TIMELINE),
+        collapse_panels=False)
+
+
+class RerunRecorder:
+    """Logs every frame of a simulator to one Rerun recording (file, viewer, or nothing).
+
+    ``path``: save to this ``.rrd`` file (checked writable here, before anything starts);
+    ``connect_url``: stream to a running viewer (``rerun+http://host:9876/proxy``); both: both;
+    neither: a cheap no-op recorder (``enabled`` is False).
+
+    ``hinge_every``: log the HINGE springs every n-th frame only (they are the mesh edges, the
+    heaviest per-frame data); AUX springs, the mesh, probes and metrics go out every frame.
+    ``appearance``: use ``paper_sim_ros.core.appearance`` when importable (texture + texture
+    coordinates); False forces the built-in grey shading.
+    """
+
+    def __init__(self, application_id: str, path: str | None = None,
+                 connect_url: str | None = None, recording_info: dict | None = None,
+                 *, hinge_every: int = 1, appearance: bool = True) -> None:
+        if not isinstance(hinge_every, int) or hinge_every < 0:
+            raise ValueError(f'hinge_every must be an integer >= 0 (0: never), got {hinge_every!r}')
+        self.path = check_writable_rrd(path) if path else None
+        self.connect_url = connect_url or None
+        self.hinge_every = hinge_every
+        self._use_appearance = appearance
+        self._lock = threading.RLock()
+        self._stream = None
+        self._closed = False
+        self._frames_logged = 0
+        self._triangles: np.ndarray | None = None
+        self._appearance = None
+        self._texture_logged = False
+        self._aux_logged = False
+        self._parameters_logged = False
+        self.recording_info = _jsonable(recording_info or {})
+        if self.path is None and self.connect_url is None:
+            return
+        import rerun as rr
+
+        if self.connect_url is not None and not self.connect_url.startswith('rerun'):
+            raise ValueError(f'rerun_connect must be a Rerun gRPC URL such as '
+                             f'rerun+http://127.0.0.1:9876/proxy, got {self.connect_url!r}')
+        stream = rr.RecordingStream(application_id, recording_id=uuid.uuid4(),
+                                    send_properties=True)
+        if not rr.is_enabled(stream):
+            raise RuntimeError('Rerun logging is disabled in this environment (RERUN=off); '
+                               'unset it or turn recording off explicitly')
+        sinks = []
+        if self.path is not None:
+            sinks.append(rr.FileSink(self.path))
+        if self.connect_url is not None:
+            try:
+                sinks.append(rr.GrpcSink(self.connect_url))
+            except Exception as error:  # the bindings raise their own types for a bad URL
+                raise ValueError(f'bad rerun_connect URL {self.connect_url!r}: {error}') from None
+        rr.set_sinks(*sinks, default_blueprint=default_blueprint(), recording=stream)
+        self._stream = stream
+        self._rr = rr
+        info = dict(self.recording_info)
+        info.setdefault('recorder', {
+            'application_id': application_id,
+            'rerun_sdk': rr.__version__,
+            'created_utc': datetime.datetime.now(datetime.timezone.utc).isoformat(),
+        })
+        self.recording_info = info
+        text = json.dumps(info, indent=1, sort_keys=True)
+        stream.log(ENTITY_INFO, rr.AnyValues(**{INFO_COMPONENT: text}), static=True)
+        stream.log(ENTITY_INFO, rr.TextDocument(f'```json\n{text}\n```',
+                                                media_type=rr.MediaType.MARKDOWN), static=True)
+        # what never changes: colours and widths of the springs and probes
+        for kind, entity in ENTITY_SPRINGS.items():
+            stream.log(entity, rr.LineStrips3D.from_fields(
+                colors=SPRING_COLORS[kind],
+                radii=rr.Radius.ui_points(1.0 if kind == HINGE else 2.5)), static=True)
+        stream.log(ENTITY_PROBES, rr.Points3D.from_fields(colors=PROBE_COLOR), static=True)
+        for name in ('breaks', 'folds'):
+            stream.log(f'{ENTITY_METRICS}/{name}', rr.SeriesLines(names=name), static=True)
+        # closed at interpreter exit too (e.g. SIGINT in a script that forgot to close)
+        self._atexit_hook = functools.partial(_close_at_exit, weakref.WeakMethod(self.close))
+        atexit.register(self._atexit_hook)
+
+    # ------------------------------------------------------------------------------ state
+    @property
+    def enabled(self) -> bool:
+        """True while this recorder writes somewhere."""
+        return self._stream is not None and not self._closed
+
+    @property
+    def frames_logged(self) -> int:
+        return self._frames_logged
+
+    # ---------------------------------------------------------------------------- logging
+    def log_frame(self, sim_time: float, simulator, vertex_colors: np.ndarray | None = None,
+                  scalars: dict[str, float] | None = None) -> None:
+        """Log the simulator's current frame at ``sim_time`` [s] on the ``sim_time`` timeline.
+
+        ``vertex_colors``: (V, 3) or (V, 4) uint8 shaded colours from the caller (they replace
+        the texture); ``scalars``: metrics by name, logged under ``paper/metrics/<name>``
+        (energy, max_strain, breaks, folds and vertices are taken from the simulator when
+        absent).
+        """
+        if not self.enabled:
+            return
+        with self._lock:
+            if not self.enabled:
+                return
+            rr = self._rr
+            stream = self._stream
+            sheet = simulator.sheet
+            self._set_time(sim_time, simulator)
+            if not self._parameters_logged:
+                self._log_parameters(simulator)
+            self._log_mesh(sheet, vertex_colors)
+            self._log_springs(sheet)
+            probes = simulator.probes
+            active = np.asarray(probes.active, dtype=bool)
+            stream.log(ENTITY_PROBES, rr.Points3D.from_fields(
+                positions=np.asarray(probes.end, dtype=np.float32)[active].reshape(-1, 3),
+                radii=np.asarray(probes.radius, dtype=np.float32)[active]))
+            self._log_probe_inputs(probes)
+            self._log_scalars(simulator, scalars or {})
+            self._frames_logged += 1
+
+    def log_inputs(self, sim_time: float, simulator) -> None:
+        """Log only the probe inputs of a frame (for a caller that steps frames it does not
+        publish: the replay then still has every frame's input)."""
+        if not self.enabled:
+            return
+        with self._lock:
+            if self.enabled:
+                self._set_time(sim_time, simulator)
+                self._log_probe_inputs(simulator.probes)
+
+    def _set_time(self, sim_time: float, simulator) -> None:
+        self._stream.set_time(TIMELINE, duration=float(sim_time))
+        self._stream.set_time(FRAME_TIMELINE, sequence=int(getattr(simulator, 'frame', 0)))
+
+    def _log_parameters(self, simulator) -> None:
+        rr = self._rr
+        config = getattr(simulator, 'config', None)
+        parameters = {
+            'config': _jsonable(config) if config is not None else None,
+            'initial_vertex_count': int(simulator.sheet.vertex_count),
+            'pinned_vertices': np.flatnonzero(simulator.sheet.pinned).tolist(),
+            'initial_positions_sha256': simulator.sheet.positions_sha256(),
+        }
+        text = json.dumps(parameters, sort_keys=True)
+        self._stream.log(ENTITY_INFO, rr.AnyValues(**{PARAMETERS_COMPONENT: text}), static=True)
+        self._parameters_logged = True
+
+    def _paper_appearance(self, sheet):
+        if self._appearance is None and self._use_appearance:
+            try:
+                from .core.appearance import AppearanceConfig, PaperAppearance
+                self._appearance = PaperAppearance(AppearanceConfig(), sheet)
+            except ImportError:
+                self._use_appearance = False
+        return self._appearance
+
+    def _log_mesh(self, sheet, vertex_colors: np.ndarray | None) -> None:
+        rr = self._rr
+        positions = sheet.positions
+        triangles = sheet.triangles
+        normals = vertex_normals(positions, triangles)
+        changed = self._triangles is None or self._triangles.shape != triangles.shape \
+            or not np.array_equal(self._triangles, triangles)
+        fields: dict[str, Any] = {
+            'vertex_positions': positions.astype(np.float32),
+            'vertex_normals': normals.astype(np.float32),
+        }
+        appearance = self._paper_appearance(sheet) if vertex_colors is None else None
+        if vertex_colors is not None:
+            fields['vertex_colors'] = np.asarray(vertex_colors, dtype=np.uint8)
+        elif appearance is None:
+            fields['vertex_colors'] = _shaded_grey(normals)
+        if changed:
+            fields['triangle_indices'] = triangles.astype(np.uint32)
+            if appearance is not None:
+                fields['vertex_texcoords'] = sheet.texture_coordinates()
+            self._triangles = triangles.copy()
+        if appearance is not None and not self._texture_logged:
+            # static, and only the texture components: a static position would hide the
+            # per-frame ones
+            image = np.ascontiguousarray(appearance.texture_image, dtype=np.uint8)
+            self._stream.log(ENTITY_MESH, rr.Mesh3D.from_fields(
+                albedo_texture_buffer=image.tobytes(),
+                albedo_texture_format=rr.components.ImageFormat(
+                    width=image.shape[1], height=image.shape[0],
+                    color_model='RGB' if image.shape[2] == 3 else 'RGBA',
+                    channel_datatype='U8')), static=True)
+            self._texture_logged = True
+        self._stream.log(ENTITY_MESH, rr.Mesh3D.from_fields(**fields))
+
+    def _log_springs(self, sheet) -> None:
+        rr = self._rr
+        kinds = [AUX]
+        if self.hinge_every and self._frames_logged % self.hinge_every == 0:
+            kinds.insert(0, HINGE)
+        for kind in kinds:
+            ends = sheet.spring_vertices[sheet.spring_kind == kind]
+            if kind == AUX:
+                if ends.shape[0] == 0 and not self._aux_logged:
+                    continue  # no damage yet and nothing shown before: keep frames lean
+                self._aux_logged = True
+            self._stream.log(ENTITY_SPRINGS[kind], rr.LineStrips3D.from_fields(
+                strips=_segments(sheet.positions, ends)))
+
+    def _log_probe_inputs(self, probes) -> None:
+        rr = self._rr
+        self._stream.log(ENTITY_PROBE_INPUTS, rr.AnyValues(
+            centers=np.ascontiguousarray(probes.end, dtype=np.float64).reshape(-1),
+            radii=np.ascontiguousarray(probes.radius, dtype=np.float64).reshape(-1),
+            active=np.asarray(probes.active, dtype=bool).reshape(-1)))
+
+    def _log_scalars(self, simulator, scalars: dict[str, float]) -> None:
+        rr = self._rr
+        values = dict(scalars)
+        if 'energy' not in values:
+            values['energy'] = simulator.energy()
+        if 'max_strain' not in values:
+            values['max_strain'] = simulator.max_strain()
+        values.setdefault('breaks', getattr(simulator, 'breaks', 0))
+        values.setdefault('folds', getattr(simulator, 'folds', 0))
+        values.setdefault('vertices', simulator.sheet.vertex_count)
+        for name, value in values.items():
+            self._stream.log(f'{ENTITY_METRICS}/{name}', rr.Scalars(float(value)))
+
+    # ---------------------------------------------------------------------------- closing
+    def close(self) -> None:
+        """Flush and finish the recording (the file gets its footer and is complete).
+        Safe to call twice, and from a signal-driven shutdown path."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            stream, self._stream = self._stream, None
+            if stream is None:
+                return
+            try:
+                stream.flush()
+            finally:
+                stream.disconnect()
+                atexit.unregister(self._atexit_hook)
+
+    def __enter__(self) -> 'RerunRecorder':
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+
+def _close_at_exit(method: weakref.WeakMethod) -> None:
+    close = method()
+    if close is not None:
+        close()
