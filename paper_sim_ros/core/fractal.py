@@ -124,9 +124,11 @@ def fractal_heights(exponent: int, amplitude: float, seed: int,
     return fractal_height_levels(exponent, amplitude, seed, levels)[-1]
 
 
-def lowpass_filter(field: np.ndarray) -> np.ndarray:
+def lowpass_filter(field: np.ndarray, keep_slope: bool = False) -> np.ndarray:
     """The paper's separable low-pass filter applied along both axes of a 2D field, the
-    border padded by reflection. A constant field is returned unchanged."""
+    border padded by reflection. A constant field is returned unchanged; with
+    ``keep_slope`` the reflection is odd (mirrored through the border value), which also
+    keeps a linear field (e.g. a coordinate) unchanged."""
     field = np.asarray(field, dtype=np.float64)
     radius = LOWPASS_TAPS.size // 2
     if min(field.shape) <= radius:
@@ -135,7 +137,8 @@ def lowpass_filter(field: np.ndarray) -> np.ndarray:
     for axis in (0, 1):
         pad = [(0, 0), (0, 0)]
         pad[axis] = (radius, radius)
-        padded = np.pad(result, pad, mode='reflect')
+        padded = np.pad(result, pad, mode='reflect',
+                        reflect_type='odd' if keep_slope else 'even')
         length = result.shape[axis]
         smoothed = np.zeros_like(result)
         for offset, weight in enumerate(LOWPASS_TAPS):

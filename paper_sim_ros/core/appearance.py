@@ -1,0 +1,385 @@
+"""Paper appearance (SPEC §6, paper §3.4.2, Fig. 10–11): per-vertex shaded, textured colours.
+
+The surface is rendered white, lit, and blended (modulated) with a paper texture sampled
+at the vertices' texture coordinates. As in the paper's Fig. 10 (c, d), the light does not
+see the full-detail fractal bumps but the normals of an intermediate, low-resolution level
+of the surface.
+
+How the intermediate-level normals follow a deforming, even a damaged, sheet: at
+construction the rest shape (the sheet given, on a ``(2^N + 1)²`` grid) is resampled on
+the lattice of fractal level L (every ``2^(N−L+1)``-th vertex), interpolated bilinearly
+back to the full grid and low-pass filtered: the surface at the resolution of "L
+iterations" (the random draws themselves are not known from a ``Sheet``; this is the same
+resolution, taken from the shape). Each vertex stores the level-L normal in its own local
+frame (the material x direction, the normal, and their cross product) of the full-detail
+rest shape, on a grid over the material. Every frame, that stored tilt is applied to the
+current local frame, looked up bilinearly at each vertex's material coordinates, so it
+rotates with the sheet, follows folds, and covers vertices that damage inserts.
+On sheets that are not such a grid (or with ``normal_level`` above N), the current
+full-detail normals shade.
+
+Decisions where the paper is silent:
+- Lighting is two-sided Lambert with an ambient term, ``ambient + (1 − ambient)·|n·l|``:
+  paper is thin and the side the viewer sees is the side the light reaches (a flap folded
+  over faces up even though its mesh normal faces down).
+- "Blend" is modulation (OpenGL ``GL_MODULATE``): colour = lit × texture; ``texture_blend``
+  mixes the texture with white first (0: plain white paper).
+- Texture rows run from the sheet's top edge (v = 0, material y = +height/2) downwards.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from numba import njit
+
+from .fractal import bilinear_upsample, grid_exponent, lowpass_filter
+from .sheet import Sheet, grid_triangles
+
+FULL_DETAIL_LEVEL = 16
+"""A ``normal_level`` at least this high always shades with the full-detail normals."""
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise ValueError(message)
+
+
+@dataclass(frozen=True)
+class AppearanceConfig:
+    """How the sheet looks (SPEC §6)."""
+
+    texture_path: str = ''
+    """Image file (any format Pillow reads) mapped onto the sheet; '' for the procedural
+    paper texture."""
+    normal_level: int = 2
+    """Fractal level (iterations) whose normals light the surface (paper Fig. 10 c: 2,
+    d: 4); ``FULL_DETAIL_LEVEL`` or any value above the grid's N: full-detail normals."""
+    light_direction: tuple = (0.35, 0.45, 1.0)
+    """Direction towards the light (need not be unit length), in the sheet's frame."""
+    ambient: float = 0.3
+    """Share of the brightness that does not depend on the light, in [0, 1]."""
+    texture_blend: float = 1.0
+    """0: plain white paper, 1: the full texture, in between: mixed with white."""
+    texture_seed: int = 0
+    """Seed of the procedural texture."""
+    texture_size: int = 512
+    """Pixels along the longer side of the procedural texture."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.texture_path, str),
+                 f'texture_path must be a string, got {self.texture_path!r}')
+        _require(isinstance(self.normal_level, int) and 1 <= self.normal_level
+                 <= FULL_DETAIL_LEVEL,
+                 f'normal_level must be an integer in [1, {FULL_DETAIL_LEVEL}], '
+                 f'got {self.normal_level!r}')
+        light = tuple(self.light_direction)
+        _require(len(light) == 3 and all(isinstance(c, (int, float)) and math.isfinite(c)
+                                         for c in light)
+                 and math.hypot(*light) > 1e-9,
+                 f'light_direction must be three finite numbers, not all zero, '
+                 f'got {self.light_direction!r}')
+        for name in ('ambient', 'texture_blend'):
+            value = getattr(self, name)
+            _require(isinstance(value, (int, float)) and math.isfinite(value)
+                     and 0.0 <= value <= 1.0, f'{name} must be in [0, 1], got {value!r}')
+        _require(isinstance(self.texture_seed, int) and 0 <= self.texture_seed < 2**63,
+                 f'texture_seed must be a non-negative integer, got {self.texture_seed!r}')
+        _require(isinstance(self.texture_size, int) and 16 <= self.texture_size <= 4096,
+                 f'texture_size must be an integer in [16, 4096], got {self.texture_size!r}')
+
+
+# ------------------------------------------------------------------------------ textures
+def _smooth_noise(rng: np.random.Generator, rows: int, columns: int, exponent: float,
+                  cutoff: float) -> np.ndarray:
+    """Zero-mean, unit-deviation noise with a 1/f^exponent spectrum above ``cutoff``
+    cycles per image (Fourier-filtered white noise; periodic)."""
+    spectrum = np.fft.rfft2(rng.standard_normal((rows, columns)))
+    fy = np.fft.fftfreq(rows)[:, None] * rows
+    fx = np.fft.rfftfreq(columns)[None, :] * columns
+    frequency = np.sqrt(fx * fx + fy * fy)
+    spectrum *= np.where(frequency > cutoff, 1.0, 0.0) / np.maximum(frequency, 1.0) ** exponent
+    field = np.fft.irfft2(spectrum, s=(rows, columns))
+    return (field - field.mean()) / max(float(field.std()), 1e-12)
+
+
+def _fibres(rng: np.random.Generator, rows: int, columns: int) -> np.ndarray:
+    """Density of short, gently curved fibres, blurred: (rows, columns) in [0, ~1]."""
+    scale = max(rows, columns) / 512.0
+    count = int(2200 * scale * scale)
+    samples = 48
+    length = rng.uniform(8.0, 40.0, count) * scale
+    heading = rng.uniform(0.0, math.pi, count)
+    bend = rng.normal(0.0, 1.2, count)
+    t = np.linspace(-0.5, 0.5, samples)[None, :]
+    angle = heading[:, None] + bend[:, None] * t
+    step = (length / samples)[:, None]
+    x = np.cumsum(step * np.cos(angle), axis=1) + rng.uniform(0, columns, count)[:, None]
+    y = np.cumsum(step * np.sin(angle), axis=1) + rng.uniform(0, rows, count)[:, None]
+    weight = np.repeat(rng.uniform(0.4, 1.0, count), samples)
+    index = (np.mod(np.rint(y).astype(np.int64), rows) * columns
+             + np.mod(np.rint(x).astype(np.int64), columns)).ravel()
+    density = np.bincount(index, weights=weight, minlength=rows * columns)
+    density = density.reshape(rows, columns)
+    if min(rows, columns) > 3:
+        density = lowpass_filter(density)
+    return density / max(float(np.percentile(density, 99.9)), 1e-12)
+
+
+def procedural_paper_texture(rows: int, columns: int, seed: int) -> np.ndarray:
+    """A generated paper texture, (rows, columns, 3) uint8: warm off-white with cloudy
+    formation (the uneven fibre density of real paper), darker fibres and fine grain."""
+    rng = np.random.default_rng(seed)
+    formation = _smooth_noise(rng, rows, columns, 1.6, 2.0)
+    grain = _smooth_noise(rng, rows, columns, 0.0, 0.0)
+    fibres = _fibres(rng, rows, columns)
+    brightness = 1.0 + 0.035 * formation + 0.012 * grain - 0.09 * np.clip(fibres, 0.0, 1.5)
+    tint = np.array([0.965, 0.955, 0.925])
+    image = brightness[..., None] * tint[None, None, :]
+    return np.clip(np.rint(255.0 * image), 0, 255).astype(np.uint8)
+
+
+def load_texture_image(path: str) -> np.ndarray:
+    """An image file as (H, W, 3) uint8. A missing file raises ``FileNotFoundError``, an
+    unreadable one ``OSError``, each naming the path."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            pixels = np.asarray(image.convert('RGB'), dtype=np.uint8)
+    except FileNotFoundError as error:
+        raise FileNotFoundError(f'texture image {path!r} does not exist') from error
+    except (UnidentifiedImageError, OSError, ValueError) as error:
+        raise OSError(f'texture image {path!r} cannot be read as an image: {error}') from error
+    if pixels.ndim != 3 or pixels.shape[0] < 1 or pixels.shape[1] < 1:
+        raise OSError(f'texture image {path!r} has no pixels')
+    return pixels.copy()
+
+
+# ------------------------------------------------------------------------------ kernels
+@njit(cache=True)
+def _frames_kernel(positions: np.ndarray, material: np.ndarray, triangles: np.ndarray,
+                   tangent: np.ndarray, bitangent: np.ndarray, normal: np.ndarray) -> None:
+    """Fills the per-vertex frames of ``local_frames`` (outputs zeroed by the caller)."""
+    for t in range(triangles.shape[0]):
+        i, j, k = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        e1x = positions[j, 0] - positions[i, 0]
+        e1y = positions[j, 1] - positions[i, 1]
+        e1z = positions[j, 2] - positions[i, 2]
+        e2x = positions[k, 0] - positions[i, 0]
+        e2y = positions[k, 1] - positions[i, 1]
+        e2z = positions[k, 2] - positions[i, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        # ∂x/∂u = (e1·d − e2·c) / det for material edges (a, c), (b, d); weighted by the
+        # material area |det| / 2 the division disappears
+        c = material[j, 1] - material[i, 1]
+        d = material[k, 1] - material[i, 1]
+        det = (material[j, 0] - material[i, 0]) * d - (material[k, 0] - material[i, 0]) * c
+        w = 0.5 if det > 0.0 else -0.5
+        ux = (e1x * d - e2x * c) * w
+        uy = (e1y * d - e2y * c) * w
+        uz = (e1z * d - e2z * c) * w
+        for v in (i, j, k):
+            normal[v, 0] += nx
+            normal[v, 1] += ny
+            normal[v, 2] += nz
+            tangent[v, 0] += ux
+            tangent[v, 1] += uy
+            tangent[v, 2] += uz
+    for v in range(positions.shape[0]):
+        nx, ny, nz = normal[v, 0], normal[v, 1], normal[v, 2]
+        length = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if not length > 1e-30 or not length < math.inf:
+            nx, ny, nz, length = 0.0, 0.0, 1.0, 1.0
+        nx, ny, nz = nx / length, ny / length, nz / length
+        tx, ty, tz = tangent[v, 0], tangent[v, 1], tangent[v, 2]
+        along = tx * nx + ty * ny + tz * nz
+        tx, ty, tz = tx - along * nx, ty - along * ny, tz - along * nz
+        length = math.sqrt(tx * tx + ty * ty + tz * tz)
+        if not length > 1e-30 or not length < math.inf:
+            # any direction orthogonal to the normal
+            if abs(nx) < 0.9:
+                tx, ty, tz = 1.0 - nx * nx, -nx * ny, -nx * nz
+            else:
+                tx, ty, tz = -ny * nx, 1.0 - ny * ny, -ny * nz
+            length = math.sqrt(tx * tx + ty * ty + tz * tz)
+        tx, ty, tz = tx / length, ty / length, tz / length
+        normal[v, 0], normal[v, 1], normal[v, 2] = nx, ny, nz
+        tangent[v, 0], tangent[v, 1], tangent[v, 2] = tx, ty, tz
+        bitangent[v, 0] = ny * tz - nz * ty
+        bitangent[v, 1] = nz * tx - nx * tz
+        bitangent[v, 2] = nx * ty - ny * tx
+
+
+@njit(cache=True)
+def _bilinear_kernel(grid: np.ndarray, x: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """out[v] = grid bilinearly sampled at column x[v], row y[v] (clamped to the grid;
+    NaN coordinates sample the first cell)."""
+    rows, columns = grid.shape[0], grid.shape[1]
+    for v in range(x.shape[0]):
+        gx = min(max(x[v], 0.0), columns - 1.0) if x[v] == x[v] else 0.0
+        gy = min(max(y[v], 0.0), rows - 1.0) if y[v] == y[v] else 0.0
+        x0 = min(int(gx), max(columns - 2, 0))
+        y0 = min(int(gy), max(rows - 2, 0))
+        x1 = min(x0 + 1, columns - 1)
+        y1 = min(y0 + 1, rows - 1)
+        fx = gx - x0
+        fy = gy - y0
+        for channel in range(grid.shape[2]):
+            top = grid[y0, x0, channel] * (1.0 - fx) + grid[y0, x1, channel] * fx
+            bottom = grid[y1, x0, channel] * (1.0 - fx) + grid[y1, x1, channel] * fx
+            out[v, channel] = top * (1.0 - fy) + bottom * fy
+
+
+def bilinear_sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(V, K) float64 samples of a (rows, columns, K) grid at fractional column ``x`` and
+    row ``y`` (clamped to the grid)."""
+    grid = np.ascontiguousarray(grid, dtype=np.float64) if grid.dtype != np.float32 \
+        else np.ascontiguousarray(grid)
+    out = np.empty((x.shape[0], grid.shape[2]))
+    _bilinear_kernel(grid, np.ascontiguousarray(x, dtype=np.float64),
+                     np.ascontiguousarray(y, dtype=np.float64), out)
+    return out
+
+
+def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear samples (V, 3) in [0, 1] of ``image`` at texture coordinates ``uv``
+    (u along columns, v along rows from the top; clamped to [0, 1]). ``image`` is uint8,
+    or float32 in [0, 1] (cheaper: no conversion per call)."""
+    rows, columns = image.shape[:2]
+    if image.dtype == np.uint8:
+        image = image.astype(np.float32) / np.float32(255.0)
+    uv = np.asarray(uv, dtype=np.float64)
+    return bilinear_sample(image, uv[:, 0] * (columns - 1), uv[:, 1] * (rows - 1))
+
+
+def _normalise(vectors: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Unit rows of ``vectors``; ``fallback`` rows where a row is zero or not finite."""
+    length = np.linalg.norm(vectors, axis=1)
+    good = np.isfinite(length) & (length > 1e-30)
+    return np.where(good[:, None], vectors / np.where(good, length, 1.0)[:, None], fallback)
+
+
+def local_frames(positions: np.ndarray, material: np.ndarray,
+                 triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-vertex orthonormal frames ``(tangent, bitangent, normal)``, each (V, 3): the
+    area-weighted normal, the material x direction (∂x/∂u of the deformation, area
+    weighted) made orthogonal to it, and their cross product. Never NaN for finite input;
+    a vertex without area gets +z and a tangent orthogonal to it."""
+    vertex_count = positions.shape[0]
+    frames = [np.zeros((vertex_count, 3)) for _ in range(3)]
+    _frames_kernel(np.ascontiguousarray(positions, dtype=np.float64),
+                   np.ascontiguousarray(material, dtype=np.float64),
+                   np.ascontiguousarray(triangles, dtype=np.int64), *frames)
+    return frames[0], frames[1], frames[2]
+
+
+def _grid_side(sheet: Sheet) -> int | None:
+    """n if the sheet is an n × n grid (n = 2^N + 1) in ``grid_material`` order, else None."""
+    side = int(round(math.sqrt(sheet.vertex_count)))
+    if side * side != sheet.vertex_count:
+        return None
+    try:
+        grid_exponent(side)
+    except ValueError:
+        return None
+    gx, gy = np.meshgrid(np.linspace(-sheet.width / 2, sheet.width / 2, side),
+                         np.linspace(-sheet.height / 2, sheet.height / 2, side))
+    expected = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    tolerance = 1e-9 * max(sheet.width, sheet.height)
+    return side if np.allclose(sheet.material, expected, rtol=0.0, atol=tolerance) else None
+
+
+def level_surface(grid_positions: np.ndarray, level: int) -> np.ndarray:
+    """The ``(n, n, 3)`` grid surface at the resolution of fractal level ``level``: its
+    vertices on the lattice of iteration ``level − 1`` (spacing ``2^(N−level+1)``), bilinear
+    in between, then low-pass filtered (keeping linear trends at the border)."""
+    exponent = grid_exponent(grid_positions.shape[0])
+    if not 1 <= level <= exponent:
+        raise ValueError(f'level must be in [1, {exponent}], got {level}')
+    stride = 1 << (exponent - level + 1)
+    coarse = grid_positions[::stride, ::stride]
+    return np.stack([lowpass_filter(bilinear_upsample(coarse[..., axis], stride),
+                                    keep_slope=True) for axis in range(3)], axis=-1)
+
+
+# ------------------------------------------------------------------------------ appearance
+class PaperAppearance:
+    """Texture and shading of one sheet; ``vertex_colors`` runs every published frame."""
+
+    def __init__(self, config: AppearanceConfig, sheet: Sheet) -> None:
+        self.config = config
+        if config.texture_path:
+            self._texture = load_texture_image(config.texture_path)
+        else:
+            longer = config.texture_size
+            ratio = sheet.height / sheet.width
+            rows = longer if ratio >= 1 else max(16, int(round(longer * ratio)))
+            columns = max(16, int(round(longer / ratio))) if ratio >= 1 else longer
+            self._texture = procedural_paper_texture(rows, columns, config.texture_seed)
+        self._texture.setflags(write=False)
+        self._texture_float = self._texture.astype(np.float32) / np.float32(255.0)
+        light = np.asarray(config.light_direction, dtype=np.float64)
+        self._light = light / np.linalg.norm(light)
+        self._width = sheet.width
+        self._height = sheet.height
+        self._tilt_grid = self._level_tilt(sheet)
+
+    @property
+    def texture_image(self) -> np.ndarray:
+        """The texture, (H, W, 3) uint8, row 0 at the sheet's top edge (read-only)."""
+        return self._texture
+
+    @property
+    def uses_level_normals(self) -> bool:
+        """True when the intermediate-level normals shade (a fractal-grid sheet)."""
+        return self._tilt_grid is not None
+
+    def _level_tilt(self, sheet: Sheet) -> np.ndarray | None:
+        """(n, n, 3): the level-L normal in the full-detail rest frame of each grid vertex,
+        or None when the full-detail normals are to shade."""
+        side = _grid_side(sheet)
+        if side is None or self.config.normal_level > grid_exponent(side):
+            return None
+        grid = np.nan_to_num(sheet.positions).reshape(side, side, 3)
+        coarse = level_surface(grid, self.config.normal_level).reshape(-1, 3)
+        triangles = grid_triangles(side, side)
+        _, _, level_normal = local_frames(coarse, sheet.material, triangles)
+        tangent, bitangent, normal = local_frames(grid.reshape(-1, 3), sheet.material,
+                                                  triangles)
+        tilt = np.stack([np.sum(level_normal * frame, axis=1)
+                         for frame in (tangent, bitangent, normal)], axis=1)
+        return tilt.reshape(side, side, 3)
+
+    def _tilt_at(self, material: np.ndarray) -> np.ndarray:
+        """Bilinear lookup of the stored tilt at material coordinates (V, 2)."""
+        cells = self._tilt_grid.shape[0] - 1
+        return bilinear_sample(self._tilt_grid, (material[:, 0] / self._width + 0.5) * cells,
+                               (material[:, 1] / self._height + 0.5) * cells)
+
+    def shading_normals(self, sheet: Sheet) -> np.ndarray:
+        """(V, 3) unit normals that light the sheet: the intermediate-level normals carried
+        by the current geometry, or the full-detail normals. Never NaN."""
+        tangent, bitangent, normal = local_frames(sheet.positions, sheet.material,
+                                                  sheet.triangles)
+        if self._tilt_grid is None:
+            return normal
+        tilt = self._tilt_at(sheet.material)
+        shaded = tilt[:, 0:1] * tangent + tilt[:, 1:2] * bitangent + tilt[:, 2:3] * normal
+        return _normalise(shaded, normal)
+
+    def vertex_colors(self, sheet: Sheet) -> np.ndarray:
+        """(V, 3) uint8 colours: the white surface lit with ``shading_normals`` (two-sided
+        Lambert plus ambient), modulated by the texture at the vertices' texture
+        coordinates. Works for any vertex count; never NaN."""
+        normals = self.shading_normals(sheet)
+        ambient = self.config.ambient
+        light = ambient + (1.0 - ambient) * np.abs(normals @ self._light)
+        texture = sample_texture(self._texture_float, sheet.texture_coordinates())
+        blend = self.config.texture_blend
+        base = blend * texture + (1.0 - blend)
+        colors = np.nan_to_num(255.0 * light[:, None] * base, nan=255.0 * ambient)
+        return np.clip(np.rint(colors), 0, 255).astype(np.uint8)
