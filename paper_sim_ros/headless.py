@@ -104,6 +104,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help='time stepping method (default constrained)')
     parser.add_argument('--metrics-json', help='write the metrics to this JSON file')
     parser.add_argument('--rrd', help='record the run to this Rerun .rrd file')
+    parser.add_argument('--replay', metavar='FILE.rrd',
+                        help='re-run a recorded session: its scenario, parameters and seed, '
+                             'driven by its recorded probe inputs')
     return parser.parse_args(argv)
 
 
@@ -124,6 +127,9 @@ def _raise_keyboard_interrupt(signum, frame) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.replay:
+        from .rerun_replay import replay_command
+        return replay_command(args)
     recorder = None
     try:
         mapping = with_overrides(load_scenario_mapping(args.scenario), grid=args.grid,

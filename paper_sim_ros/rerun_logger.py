@@ -22,12 +22,14 @@ frame counter). Imports go one way: this module reads the core, the core never i
 from __future__ import annotations
 
 import atexit
+import contextlib
 import dataclasses
 import datetime
 import functools
 import json
 import math
 import os
+import signal
 import threading
 import uuid
 import weakref
@@ -245,7 +247,7 @@ class RerunRecorder:
         """
         if not self.enabled:
             return
-        with self._lock:
+        with self._lock, _signals_deferred():
             if not self.enabled:
                 return
             rr = self._rr
@@ -391,6 +393,23 @@ class RerunRecorder:
 
     def __exit__(self, *exc_info) -> None:
         self.close()
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT and SIGTERM back while one frame is logged, so that a stop lands between
+    frames and the recording ends on a whole frame (mesh, probes, inputs and metrics)."""
+    if not hasattr(signal, 'pthread_sigmask'):
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _DEFERRED_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+_DEFERRED_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
 def _close_at_exit(method: weakref.WeakMethod) -> None:

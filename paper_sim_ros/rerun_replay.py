@@ -1,0 +1,419 @@
+"""Read a recorded session back with Rerun's own API, and re-run it (SPEC §8).
+
+Reading goes through ``rerun.chunk.RrdReader(path).stream()``: it reads a finished recording
+and also one whose writer died before writing the footer (``RrdReader.store()``, the lazy
+manifest-based store, needs the footer; ``is_complete`` says whether it is there).
+
+Re-running: the recording holds the scenario mapping (``recording_info['scenario']``), every
+parameter of the simulation (``parameters_json``: the ``SimulationConfig``, the pinned
+vertices, the hash of the initial sheet) and the exact probe inputs of every frame
+(``paper/inputs/probes``, float64). ``replay(path)`` rebuilds the scenario, checks that the
+rebuilt simulation has the recorded configuration and initial sheet, and steps it with the
+recorded probe inputs in place of the scenario's keyframe tracks; with the same seed the final
+positions hash equals the original run's (``final_positions_sha256`` in the metrics).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+import json
+import os
+from typing import Any, Callable
+
+import numpy as np
+
+from .rerun_logger import (ENTITY_INFO, ENTITY_MESH, ENTITY_METRICS, ENTITY_PROBE_INPUTS,
+                           FRAME_TIMELINE, INFO_COMPONENT, PARAMETERS_COMPONENT, TIMELINE,
+                           _jsonable, check_writable_rrd)
+
+POSITIONS = 'Mesh3D:vertex_positions'
+TRIANGLES = 'Mesh3D:triangle_indices'
+SCALARS = 'Scalars:scalars'
+
+
+@dataclass(frozen=True)
+class ProbeInput:
+    """The probe inputs of one recorded frame: what ``Simulator.set_probes`` received."""
+
+    frame: int
+    sim_time: float
+    centers: np.ndarray
+    """(P, 3) float64 [m]."""
+    radii: np.ndarray
+    """(P,) float64 [m]."""
+    active: np.ndarray
+    """(P,) bool."""
+
+
+@dataclass(frozen=True)
+class MeshFrame:
+    frame: int
+    sim_time: float
+    positions: np.ndarray
+    """(V, 3) float32 [m] as logged."""
+    triangle_count: int | None
+    """Triangles logged on this frame (None: the topology did not change)."""
+
+
+# ------------------------------------------------------------------------------ reading
+def read_chunks(path: str) -> list:
+    """Every chunk of the first recording store in ``path`` (footer or not)."""
+    from rerun.chunk import RrdReader
+
+    return RrdReader(path).stream().to_chunks()
+
+
+def is_complete(path: str) -> bool:
+    """True when the recording was finished properly (it has its footer/manifest, so the
+    lazy ``RrdReader(path).store()`` opens it)."""
+    from rerun.chunk import RrdReader
+
+    try:
+        RrdReader(path).store()
+    except Exception:  # the bindings raise their own error type for a missing footer
+        return False
+    return True
+
+
+def _entity(chunk) -> str:
+    return chunk.entity_path.lstrip('/')
+
+
+def _column(batch, name: str) -> list | None:
+    return batch.column(name).to_pylist() if name in batch.schema.names else None
+
+
+def _time_seconds(batch) -> list[float]:
+    values = batch.column(TIMELINE).cast('int64').to_pylist()
+    return [value / 1e9 for value in values]
+
+
+def _temporal_rows(chunks: list, entity: str, component: str) -> list[tuple[int, float, Any]]:
+    """(frame, sim_time, value) of every row of ``entity`` that holds ``component``,
+    sorted by sim_time then frame."""
+    rows = []
+    for chunk in chunks:
+        if _entity(chunk) != entity or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        if component not in batch.schema.names or TIMELINE not in batch.schema.names:
+            continue
+        frames = batch.column(FRAME_TIMELINE).to_pylist() \
+            if FRAME_TIMELINE in batch.schema.names else [None] * batch.num_rows
+        times = _time_seconds(batch)
+        column = batch.column(component)
+        for row in range(batch.num_rows):
+            if column[row].is_valid:
+                rows.append((frames[row], times[row], column[row]))
+    rows.sort(key=lambda row: (row[1], row[0] if row[0] is not None else 0))
+    return rows
+
+
+def _static_text(chunks: list, component: str) -> str | None:
+    for chunk in chunks:
+        if _entity(chunk) == ENTITY_INFO and chunk.is_static:
+            values = _column(chunk.to_record_batch(), component)
+            if values and values[-1]:
+                return values[-1][0]
+    return None
+
+
+def read_recording_info(path: str, chunks: list | None = None) -> dict:
+    """The recording info logged at start (scenario, parameters, seed, recorder)."""
+    text = _static_text(chunks if chunks is not None else read_chunks(path), INFO_COMPONENT)
+    if text is None:
+        raise ValueError(f'{path}: no {ENTITY_INFO}:{INFO_COMPONENT}; not a paper_sim_ros '
+                         f'recording')
+    return json.loads(text)
+
+
+def read_parameters(path: str, chunks: list | None = None) -> dict:
+    """The simulation parameters logged with the first frame: ``config`` (every field of the
+    SimulationConfig), ``pinned_vertices``, ``initial_vertex_count``,
+    ``initial_positions_sha256``."""
+    text = _static_text(chunks if chunks is not None else read_chunks(path),
+                        PARAMETERS_COMPONENT)
+    if text is None:
+        raise ValueError(f'{path}: no {ENTITY_INFO}:{PARAMETERS_COMPONENT}; no frame was '
+                         f'recorded')
+    return json.loads(text)
+
+
+def read_probe_inputs(path: str, chunks: list | None = None) -> list[ProbeInput]:
+    """The probe inputs of every recorded frame, in frame order."""
+    chunks = chunks if chunks is not None else read_chunks(path)
+    inputs = {}
+    for chunk in chunks:
+        if _entity(chunk) != ENTITY_PROBE_INPUTS or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        frames = batch.column(FRAME_TIMELINE).to_pylist()
+        times = _time_seconds(batch)
+        centers, radii, active = (batch.column(name).to_pylist()
+                                  for name in ('centers', 'radii', 'active'))
+        for row in range(batch.num_rows):
+            inputs[frames[row]] = ProbeInput(
+                frame=frames[row], sim_time=times[row],
+                centers=np.asarray(centers[row], dtype=np.float64).reshape(-1, 3),
+                radii=np.asarray(radii[row], dtype=np.float64),
+                active=np.asarray(active[row], dtype=bool))
+    return [inputs[frame] for frame in sorted(inputs)]
+
+
+def read_mesh_frames(path: str, chunks: list | None = None) -> list[MeshFrame]:
+    """Every logged frame of ``paper/mesh`` (sim_time order) with its vertex positions."""
+    chunks = chunks if chunks is not None else read_chunks(path)
+    frames = []
+    for chunk in chunks:
+        if _entity(chunk) != ENTITY_MESH or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        frame_numbers = batch.column(FRAME_TIMELINE).to_pylist()
+        times = _time_seconds(batch)
+        positions = batch.column(POSITIONS)
+        triangles = batch.column(TRIANGLES) if TRIANGLES in batch.schema.names else None
+        for row in range(batch.num_rows):
+            if not positions[row].is_valid:
+                continue
+            flat = positions[row].values.flatten().to_numpy(zero_copy_only=False)
+            count = None
+            if triangles is not None and triangles[row].is_valid:
+                count = len(triangles[row])
+            frames.append(MeshFrame(frame=frame_numbers[row], sim_time=times[row],
+                                    positions=flat.reshape(-1, 3), triangle_count=count))
+    frames.sort(key=lambda mesh: (mesh.sim_time, mesh.frame))
+    return frames
+
+
+def read_scalars(path: str, chunks: list | None = None) -> dict[str, tuple[np.ndarray,
+                                                                             np.ndarray]]:
+    """Every scalar series under ``paper/metrics``: name -> (sim_time [s], values)."""
+    chunks = chunks if chunks is not None else read_chunks(path)
+    series: dict[str, list[tuple[float, float]]] = {}
+    for chunk in chunks:
+        entity = _entity(chunk)
+        if not entity.startswith(ENTITY_METRICS + '/') or chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        if SCALARS not in batch.schema.names:
+            continue
+        name = entity[len(ENTITY_METRICS) + 1:]
+        for time, value in zip(_time_seconds(batch), batch.column(SCALARS).to_pylist()):
+            if value:
+                series.setdefault(name, []).append((time, value[0]))
+    result = {}
+    for name, points in series.items():
+        points.sort()
+        result[name] = (np.array([p[0] for p in points]), np.array([p[1] for p in points]))
+    return result
+
+
+def summary(path: str) -> dict:
+    """A compact description of a recording: what a test or a user checks first."""
+    chunks = read_chunks(path)
+    meshes = read_mesh_frames(path, chunks)
+    inputs = read_probe_inputs(path, chunks)
+    return {
+        'complete': is_complete(path),
+        'recording_info': read_recording_info(path, chunks),
+        'mesh_rows': len(meshes),
+        'vertex_counts': sorted({mesh.positions.shape[0] for mesh in meshes}),
+        'topology_rows': sum(mesh.triangle_count is not None for mesh in meshes),
+        'first_frame': meshes[0].frame if meshes else None,
+        'last_frame': meshes[-1].frame if meshes else None,
+        'last_sim_time': meshes[-1].sim_time if meshes else None,
+        'probe_input_rows': len(inputs),
+        'scalars': sorted(read_scalars(path, chunks)),
+    }
+
+
+# ----------------------------------------------------------------------------- re-running
+class RecordedScenario:
+    """A scenario whose probe inputs are the recorded ones, frame by frame.
+
+    Duck-types ``core.scenarios.Scenario`` for the headless runner: ``name``, ``config``,
+    ``frame_count``, ``pinned_mask`` and ``probe_inputs(time)``, where ``time`` is the end of
+    frame k = round(time / dt) (the headless runner's convention). A frame with no recorded
+    input keeps the latest earlier one (Rerun's latest-at), and ``exact`` is False then.
+    """
+
+    def __init__(self, scenario, inputs: list[ProbeInput]) -> None:
+        if not inputs:
+            raise ValueError('the recording has no probe inputs: no frame was recorded')
+        self.scenario = scenario
+        self.name = f'{scenario.name} (replay)'
+        self.description = scenario.description
+        self.pin = scenario.pin
+        self.config = scenario.config
+        self.mapping = scenario.mapping
+        self.probes = scenario.probes
+        self.duration = inputs[-1].frame * scenario.config.solver.dt
+        self.frame_count = int(inputs[-1].frame)
+        self._by_frame = {item.frame: item for item in inputs}
+        frames = sorted(self._by_frame)
+        self.exact = frames == list(range(1, self.frame_count + 1))
+        self._frames = np.array(frames)
+
+    def pinned_mask(self, sheet) -> np.ndarray:
+        return self.scenario.pinned_mask(sheet)
+
+    def probe_inputs_at_frame(self, frame: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centres, radii and active flags recorded for ``frame`` (1-based: the state after
+        the k-th step), or the latest earlier recorded frame's."""
+        item = self._by_frame.get(frame)
+        if item is None:
+            earlier = self._frames[self._frames <= frame]
+            source = int(earlier[-1]) if earlier.size else int(self._frames[0])
+            item = self._by_frame[source]
+        return item.centers.copy(), item.radii.copy(), item.active.copy()
+
+    def probe_inputs(self, time: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.probe_inputs_at_frame(int(round(time / self.config.solver.dt)))
+
+
+def config_from_dict(values: dict):
+    """A ``SimulationConfig`` from ``dataclasses.asdict`` output (as recorded), every nested
+    config dataclass included (lists back to tuples where the default is a tuple)."""
+    from .core.config import SimulationConfig
+
+    def build(cls, mapping: dict):
+        kwargs = {}
+        for spec in dataclasses.fields(cls):
+            if spec.name not in mapping:
+                continue
+            value = mapping[spec.name]
+            default = spec.default_factory() if spec.default_factory is not dataclasses.MISSING \
+                else spec.default
+            if dataclasses.is_dataclass(default) and isinstance(value, dict):
+                value = build(type(default), value)
+            elif isinstance(default, tuple) and isinstance(value, list):
+                value = tuple(value)
+            kwargs[spec.name] = value
+        unknown = sorted(set(mapping) - {spec.name for spec in dataclasses.fields(cls)})
+        if unknown:
+            raise ValueError(f'the recording has {cls.__name__} parameters this version does '
+                             f'not know: {", ".join(unknown)}')
+        return cls(**kwargs)
+
+    return build(SimulationConfig, values)
+
+
+def _differences(rebuilt: Any, recorded: Any, prefix: str = 'config') -> list[str]:
+    """Readable differences between two JSON-like values, by dotted key."""
+    if isinstance(rebuilt, dict) and isinstance(recorded, dict):
+        found = []
+        for key in sorted(set(rebuilt) | set(recorded)):
+            if key not in recorded:
+                found.append(f'{prefix}.{key} not recorded')
+            elif key not in rebuilt:
+                found.append(f'{prefix}.{key} unknown now')
+            else:
+                found += _differences(rebuilt[key], recorded[key], f'{prefix}.{key}')
+        return found
+    return [] if rebuilt == recorded else [f'{prefix}: {recorded!r} recorded, {rebuilt!r} now']
+
+
+def recorded_scenario(path: str, chunks: list | None = None) -> RecordedScenario:
+    """Rebuild the recorded scenario and check it against the recorded parameters."""
+    from .core.scenarios import scenario_from_mapping
+
+    chunks = chunks if chunks is not None else read_chunks(path)
+    info = read_recording_info(path, chunks)
+    parameters = read_parameters(path, chunks)
+    mapping = info.get('scenario')
+    if not isinstance(mapping, dict):
+        raise ValueError(f'{path}: the recording names no scenario (recording_info has no '
+                         f'"scenario" mapping), so it cannot be re-run')
+    scenario = scenario_from_mapping(mapping)
+    recorded = parameters.get('config')
+    if recorded is not None:
+        differences = _differences(_jsonable(scenario.config), recorded)
+        if differences:
+            raise ValueError(f'{path}: the scenario rebuilt from the recording does not have '
+                             f'the recorded parameters ({"; ".join(differences[:5])}): the code '
+                             f'changed since it was recorded')
+    return RecordedScenario(scenario, read_probe_inputs(path, chunks))
+
+
+def replay(path: str, rrd: str | None = None,
+           on_frame: Callable | None = None) -> dict:
+    """Re-run a recorded session with its recorded probe inputs; the headless metrics of the
+    new run, plus ``replay_of`` (the recording), ``replay_frames`` and ``replay_exact``
+    (every frame's input was recorded). ``rrd``: record the new run too."""
+    from .headless import build_simulator, run_scenario
+
+    chunks = read_chunks(path)
+    scenario = recorded_scenario(path, chunks)
+    parameters = read_parameters(path, chunks)
+    simulator = build_simulator(scenario)
+    initial = parameters.get('initial_positions_sha256')
+    if initial is not None and simulator.sheet.positions_sha256() != initial:
+        raise ValueError(f'{path}: the rebuilt initial sheet differs from the recorded one')
+    pinned = parameters.get('pinned_vertices')
+    if pinned is not None and np.flatnonzero(simulator.sheet.pinned).tolist() != pinned:
+        raise ValueError(f'{path}: the rebuilt sheet pins other vertices than the recording')
+    recorder = None
+    callback = on_frame
+    if rrd:
+        from .rerun_logger import RerunRecorder
+
+        info = dict(read_recording_info(path, chunks))
+        info['replay_of'] = str(path)
+        info.pop('recorder', None)
+        recorder = RerunRecorder('paper_sim_replay', path=rrd, recording_info=info)
+        dt = scenario.config.solver.dt
+
+        def callback(sim, step_seconds: float) -> None:
+            recorder.log_frame(sim.time, sim, scalars={
+                'step_time': step_seconds,
+                'real_time_factor': dt / step_seconds if step_seconds > 0 else 0.0})
+            if on_frame is not None:
+                on_frame(sim, step_seconds)
+    try:
+        metrics = run_scenario(scenario, on_frame=callback, simulator=simulator)
+    finally:
+        if recorder is not None:
+            recorder.close()
+    metrics['replay_of'] = str(path)
+    metrics['replay_frames'] = scenario.frame_count
+    metrics['replay_exact'] = scenario.exact
+    return metrics
+
+
+def replay_command(args) -> int:
+    """``paper_sim_headless --replay FILE.rrd [--rrd OUT.rrd] [--metrics-json OUT.json]``:
+    the headless runner's replay mode. Exit status 0, 2 on bad input, 130 when interrupted."""
+    import signal
+    import sys
+
+    from .headless import _raise_keyboard_interrupt
+
+    overrides = [f'--{name.replace("_", "-")}' for name in
+                 ('grid', 'duration', 'dt', 'substeps', 'seed', 'solver')
+                 if getattr(args, name, None) is not None]
+    try:
+        if overrides:
+            raise ValueError(f'--replay takes the scenario and every parameter from the '
+                             f'recording; it cannot be combined with {", ".join(overrides)}')
+        if not os.path.isfile(args.replay):
+            raise ValueError(f'no such recording: {args.replay}')
+        if args.metrics_json:
+            directory = os.path.dirname(os.path.abspath(args.metrics_json))
+            if not os.access(directory, os.W_OK):
+                raise ValueError(f'cannot write metrics to {args.metrics_json}')
+        if args.rrd:
+            check_writable_rrd(args.rrd)
+        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+        metrics = replay(args.replay, rrd=args.rrd)
+    except (ValueError, OSError) as error:
+        print(f'paper_sim_headless: error: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print('paper_sim_headless: interrupted', file=sys.stderr)
+        return 130
+    text = json.dumps(metrics, indent=2)
+    if args.metrics_json:
+        with open(args.metrics_json, 'w', encoding='utf-8') as stream:
+            stream.write(text + '\n')
+    print(text)
+    return 0
