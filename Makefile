@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 ROS_WHEELS := "ros-jazzy-rclpy[fastrtps]" ros-jazzy-visualization-msgs ros-jazzy-sensor-msgs \
 	ros-jazzy-geometry-msgs ros-jazzy-std-srvs ros-jazzy-diagnostic-msgs
-PY_DEPS := numpy numba rerun-sdk==0.41.* pyyaml scipy pytest pillow
+PY_DEPS := numpy numba rerun-sdk==0.41.* pyyaml scipy pytest pillow colcon-core colcon-ros colcon-python-setup-py colcon-package-selection colcon-output colcon-library-path
 
 .PHONY: setup demo test bench clean
 

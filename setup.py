@@ -26,6 +26,8 @@ setup(
     entry_points={
         'console_scripts': [
             'paper_sim_headless = paper_sim_ros.headless:main',
+            'paper_sim_node = paper_sim_ros.node:main',
+            'paper_sim_scripted_probe = paper_sim_ros.scripted_probe:main',
         ],
     },
 )

@@ -1,0 +1,45 @@
+"""Launch the paper simulation, optionally with RViz and the scripted demo probe.
+
+    ros2 launch paper_sim_ros paper_sim.launch.py
+    ros2 launch paper_sim_ros paper_sim.launch.py rviz:=true scripted_probe:=true
+    ros2 launch paper_sim_ros paper_sim.launch.py params_file:=/path/to/my.yaml use_sim_time:=true
+
+Needs a ROS 2 install with ``launch`` and ``launch_ros`` (they are not on PyPI; without them,
+run ``python -m paper_sim_ros.demo`` or the executables directly).
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description() -> LaunchDescription:
+    share = get_package_share_directory('paper_sim_ros')
+    params_file = LaunchConfiguration('params_file')
+    use_sim_time = LaunchConfiguration('use_sim_time')
+    return LaunchDescription([
+        DeclareLaunchArgument(
+            'params_file', default_value=os.path.join(share, 'config', 'paper_sim.yaml'),
+            description='Node-keyed parameter file of the paper_sim node'),
+        DeclareLaunchArgument('use_sim_time', default_value='false',
+                              description='Follow /clock instead of the wall clock'),
+        DeclareLaunchArgument('rviz', default_value='false',
+                              description='Start RViz with config/paper_sim.rviz'),
+        DeclareLaunchArgument('scripted_probe', default_value='false',
+                              description='Start the scripted probe that presses and drags'),
+        Node(package='paper_sim_ros', executable='paper_sim_node', name='paper_sim',
+             output='screen', emulate_tty=True,
+             parameters=[params_file, {'use_sim_time': use_sim_time}]),
+        Node(package='paper_sim_ros', executable='paper_sim_scripted_probe',
+             name='scripted_probe', output='screen',
+             parameters=[{'use_sim_time': use_sim_time}],
+             condition=IfCondition(LaunchConfiguration('scripted_probe'))),
+        Node(package='rviz2', executable='rviz2', name='rviz2', output='log',
+             arguments=['-d', os.path.join(share, 'config', 'paper_sim.rviz')],
+             parameters=[{'use_sim_time': use_sim_time}],
+             condition=IfCondition(LaunchConfiguration('rviz'))),
+    ])

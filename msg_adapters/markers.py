@@ -1,0 +1,212 @@
+"""The sheet as ``visualization_msgs/MarkerArray`` for RViz.
+
+Namespaces and ids are stable, so RViz replaces markers in place frame after frame:
+
+    ns                    id   type             what
+    paper/surface         0    TRIANGLE_LIST    the shaded surface, one colour per point
+    paper/springs/hinge   0    LINE_LIST        HINGE springs (triangle edges)
+    paper/springs/aux     0    LINE_LIST        AUX springs (creases, folds: damage memory)
+    paper/springs/bend    0    LINE_LIST        BEND springs (off by default)
+    paper/probes          i    SPHERE           probe i (DELETE while it is inactive)
+
+A spring kind with no springs is sent as DELETE: RViz warns about an empty LINE_LIST.
+
+Cost (measured by bench/bench_adapters.py): every point of a marker is one Python
+``geometry_msgs/Point`` and every colour one ``std_msgs/ColorRGBA`` (slow). We build one
+``Point`` and one ``ColorRGBA`` per *vertex* and let the triangle and line lists refer to
+the same objects by index, which costs a list index per entry instead of an object. The
+serialisation inside ``publish`` still reads every entry (about 0.8 µs each).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from builtin_interfaces.msg import Duration
+from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from std_msgs.msg import ColorRGBA, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from paper_sim_ros.core.sheet import AUX, BEND, HINGE
+
+SURFACE_NS = 'paper/surface'
+SPRING_NS = {HINGE: 'paper/springs/hinge', AUX: 'paper/springs/aux', BEND: 'paper/springs/bend'}
+PROBE_NS = 'paper/probes'
+IDENTITY = Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+
+
+@dataclass(frozen=True)
+class MarkerStyle:
+    """What to draw and how. Colours are RGBA in [0, 1]; widths in m."""
+
+    hinge_springs: bool = True
+    aux_springs: bool = True
+    bend_springs: bool = False
+    hinge_width: float = 0.0004
+    aux_width: float = 0.0012
+    bend_width: float = 0.0003
+    hinge_color: tuple = (0.30, 0.40, 0.85, 0.6)
+    aux_color: tuple = (0.90, 0.15, 0.10, 1.0)
+    bend_color: tuple = (0.20, 0.70, 0.30, 0.4)
+    probe_color: tuple = (0.95, 0.60, 0.10, 0.7)
+
+    def __post_init__(self) -> None:
+        for name in ('hinge_width', 'aux_width', 'bend_width'):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f'{name} must be finite and > 0, got {value!r}')
+        for name in ('hinge_color', 'aux_color', 'bend_color', 'probe_color'):
+            value = getattr(self, name)
+            if len(value) != 4 or not all(0.0 <= c <= 1.0 for c in value):
+                raise ValueError(f'{name} must be four numbers in [0, 1], got {value!r}')
+
+    def spring_settings(self, kind: int) -> tuple[bool, float, tuple]:
+        name = {HINGE: 'hinge', AUX: 'aux', BEND: 'bend'}[kind]
+        return (getattr(self, f'{name}_springs'), getattr(self, f'{name}_width'),
+                getattr(self, f'{name}_color'))
+
+
+def _checked_finite(name: str, array: np.ndarray) -> np.ndarray:
+    if not np.isfinite(array).all():
+        raise ValueError(f'{name} must be finite')
+    return array
+
+
+def points_from_array(positions: np.ndarray) -> list[Point]:
+    """One ``Point`` per row of a (N, 3) array.
+
+    The fastest legal construction measured (bench/bench_adapters.py): ``tolist()`` once,
+    then the generated class's keyword constructor in a comprehension. (Writing the private
+    ``_x`` slots directly is about 3x faster but relies on generated internals; a numpy
+    record array is accepted by the serialiser through duck typing but is 10x slower.)
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 2 or positions.shape[1] != 3:
+        raise ValueError(f'positions must be (N, 3), got {positions.shape}')
+    _checked_finite('positions', positions)
+    return [Point(x=x, y=y, z=z) for x, y, z in positions.tolist()]
+
+
+def colors_from_array(colors: np.ndarray, alpha: float = 1.0) -> list[ColorRGBA]:
+    """One ``ColorRGBA`` per row of a (N, 3) uint8 array (0-255) or float array (0-1)."""
+    colors = np.asarray(colors)
+    if colors.ndim != 2 or colors.shape[1] != 3:
+        raise ValueError(f'colors must be (N, 3), got {colors.shape}')
+    if colors.dtype == np.uint8:
+        unit = colors.astype(np.float64) / 255.0
+    else:
+        unit = np.clip(np.nan_to_num(colors.astype(np.float64), nan=0.0), 0.0, 1.0)
+    # ColorRGBA holds float32: round here so that a message survives serialisation unchanged
+    alpha = float(np.float32(alpha))
+    return [ColorRGBA(r=r, g=g, b=b, a=alpha) for r, g, b in unit.astype(np.float32).tolist()]
+
+
+def rgba(color: tuple) -> ColorRGBA:
+    """A ColorRGBA of four numbers in [0, 1], rounded to float32 like its fields."""
+    r, g, b, a = np.asarray(color, dtype=np.float32).tolist()
+    return ColorRGBA(r=r, g=g, b=b, a=a)
+
+
+def _base_marker(header: Header, ns: str, marker_id: int, marker_type: int) -> Marker:
+    return Marker(header=header, ns=ns, id=marker_id, type=marker_type, action=Marker.ADD,
+                  pose=Pose(orientation=IDENTITY), lifetime=Duration(sec=0, nanosec=0),
+                  frame_locked=False)
+
+
+def delete_marker(header: Header, ns: str, marker_id: int) -> Marker:
+    return Marker(header=header, ns=ns, id=marker_id, action=Marker.DELETE,
+                  pose=Pose(orientation=IDENTITY), scale=Vector3(x=1.0, y=1.0, z=1.0))
+
+
+def delete_all_marker(header: Header) -> Marker:
+    """Clears every marker of this publisher in RViz (sent first after a reset)."""
+    return Marker(header=header, action=Marker.DELETEALL, pose=Pose(orientation=IDENTITY),
+                  scale=Vector3(x=1.0, y=1.0, z=1.0))
+
+
+def surface_marker(header: Header, vertex_points: list[Point], triangles: np.ndarray,
+                   vertex_colors: list[ColorRGBA]) -> Marker:
+    """TRIANGLE_LIST with three points (and three colours) per triangle, shared objects."""
+    triangles = np.asarray(triangles)
+    if triangles.ndim != 2 or triangles.shape[1] != 3:
+        raise ValueError(f'triangles must be (T, 3), got {triangles.shape}')
+    if len(vertex_colors) != len(vertex_points):
+        raise ValueError('one colour per vertex is required')
+    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(vertex_points)):
+        raise ValueError('triangle index out of range')
+    order = triangles.ravel().tolist()
+    marker = _base_marker(header, SURFACE_NS, 0, Marker.TRIANGLE_LIST)
+    marker.scale = Vector3(x=1.0, y=1.0, z=1.0)
+    marker.color = rgba((1.0, 1.0, 1.0, 1.0))
+    marker.points = [vertex_points[i] for i in order]
+    marker.colors = [vertex_colors[i] for i in order]
+    return marker
+
+
+def spring_marker(header: Header, vertex_points: list[Point], spring_vertices: np.ndarray,
+                  kind: int, width: float, color: tuple) -> Marker:
+    """LINE_LIST of the given springs (two points per spring), or DELETE when there are none."""
+    spring_vertices = np.asarray(spring_vertices)
+    ns = SPRING_NS[kind]
+    if spring_vertices.shape[0] == 0:
+        return delete_marker(header, ns, 0)
+    if spring_vertices.ndim != 2 or spring_vertices.shape[1] != 2:
+        raise ValueError(f'spring_vertices must be (S, 2), got {spring_vertices.shape}')
+    if spring_vertices.min() < 0 or spring_vertices.max() >= len(vertex_points):
+        raise ValueError('spring vertex index out of range')
+    marker = _base_marker(header, ns, 0, Marker.LINE_LIST)
+    marker.scale = Vector3(x=float(width), y=0.0, z=0.0)
+    marker.color = rgba(color)
+    marker.points = [vertex_points[i] for i in spring_vertices.ravel().tolist()]
+    return marker
+
+
+def probe_markers(header: Header, centers: np.ndarray, radii: np.ndarray, active: np.ndarray,
+                  color: tuple) -> list[Marker]:
+    """A SPHERE per active probe (diameter 2 r), DELETE for each inactive one."""
+    centers = np.asarray(centers, dtype=np.float64).reshape(-1, 3)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    active = np.asarray(active, dtype=bool).reshape(-1)
+    if not (len(centers) == len(radii) == len(active)):
+        raise ValueError('centers, radii and active must have the same length')
+    markers = []
+    rows = zip(centers.tolist(), radii.tolist(), active.tolist())
+    for index, (center, radius, on) in enumerate(rows):
+        usable = on and np.isfinite(center).all() and np.isfinite(radius) and radius > 0
+        if not usable:
+            markers.append(delete_marker(header, PROBE_NS, index))
+            continue
+        marker = _base_marker(header, PROBE_NS, index, Marker.SPHERE)
+        marker.pose = Pose(position=Point(x=center[0], y=center[1], z=center[2]),
+                           orientation=IDENTITY)
+        marker.scale = Vector3(x=2.0 * radius, y=2.0 * radius, z=2.0 * radius)
+        marker.color = rgba(color)
+        markers.append(marker)
+    return markers
+
+
+def sheet_markers(header: Header, positions: np.ndarray, triangles: np.ndarray,
+                  vertex_colors: np.ndarray, spring_vertices: np.ndarray,
+                  spring_kind: np.ndarray, probe_centers: np.ndarray, probe_radii: np.ndarray,
+                  probe_active: np.ndarray, style: MarkerStyle = MarkerStyle(),
+                  delete_all: bool = False) -> MarkerArray:
+    """The whole sheet as one MarkerArray; ``delete_all`` puts a DELETEALL first (reset)."""
+    positions = np.asarray(positions)
+    spring_kind = np.asarray(spring_kind)
+    vertex_points = points_from_array(positions)
+    if len(vertex_colors) != len(vertex_points):
+        raise ValueError(f'{len(vertex_colors)} colours for {len(vertex_points)} vertices')
+    markers = [delete_all_marker(header)] if delete_all else []
+    markers.append(surface_marker(header, vertex_points, triangles,
+                                  colors_from_array(vertex_colors)))
+    for kind in (HINGE, AUX, BEND):
+        shown, width, color = style.spring_settings(kind)
+        if shown:
+            markers.append(spring_marker(header, vertex_points,
+                                         np.asarray(spring_vertices)[spring_kind == kind],
+                                         kind, width, color))
+        else:
+            markers.append(delete_marker(header, SPRING_NS[kind], 0))
+    markers.extend(probe_markers(header, probe_centers, probe_radii, probe_active,
+                                 style.probe_color))
+    return MarkerArray(markers=markers)

@@ -1,0 +1,590 @@
+"""The ROS 2 node: probe poses in; markers, point clouds and diagnostics out (SPEC §7).
+
+    ros2 run paper_sim_ros paper_sim_node --ros-args --params-file config/paper_sim.yaml
+    python -m paper_sim_ros.node --ros-args --params-file config/paper_sim.yaml
+
+Timing. The simulation steps frames of exactly dt = 1 / ``physics_rate`` on a timer of the
+node's clock (wall clock, or ``/clock`` with ``use_sim_time``). Each tick steps as many frames
+as the clock has advanced, at most ``max_catchup_frames``; if it is further behind, the
+simulation slips (its clock origin moves forward, the real-time factor drops below 1) instead
+of taking bigger steps. Outputs are scheduled in simulated time at their own rates, and at
+most one of each is published per tick: when frames are stepped faster than outputs can
+follow, publications are dropped, never physics frames. Both are counted in ``/diagnostics``.
+
+Stamps. Every header carries ``frame_id`` and the time of the state it shows: the clock time
+at which the simulation started (or was reset) plus the simulated time.
+
+Probes. One ``geometry_msgs/PoseStamped`` topic per probe (``probe_topics``); only the latest
+pose of each is kept (queue depth 1), so a flood of poses costs a callback each and nothing
+else. Poses in another frame, with NaN / inf, or absurdly far away are refused with a
+throttled warning naming the reason, and counted.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import math
+import sys
+import time
+
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
+from rclpy.time import Time
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Header
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from .core.sheet import AUX, BEND, HINGE, Sheet
+from .core.simulator import Simulator
+from .core.topology import vertex_normals
+from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
+from .msg_adapters.markers import MarkerStyle, sheet_markers
+from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
+from .msg_adapters.surface import damage_labels, lambert_colors
+from .node_runner import run_node
+from .node_parameters import PARAMETER_SPECS, PARAMETERS, NodeSettings, settings_from_values
+
+try:
+    from .core.appearance import AppearanceConfig, PaperAppearance
+except ImportError:  # appearance not built yet: fall back to our own Lambert shading
+    PaperAppearance = None
+try:
+    from .rerun_logger import RerunRecorder
+except ImportError:  # recorder not built yet: recording parameters are refused if set
+    RerunRecorder = None
+
+NODE_NAME = 'paper_sim'
+DIAGNOSTIC_NAME = 'paper_sim: simulation'
+OUTPUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+"""Reliable, latest only: RViz subscribes reliable by default; best-effort readers connect."""
+POSE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE)
+"""Depth 1: under a flood only the latest pose waits for the executor."""
+WARN_EVERY = 2.0
+"""Seconds between two warnings of one kind (refused poses, failed ticks)."""
+
+
+class StartupError(Exception):
+    """A configuration the node cannot start with; the message says why."""
+
+
+@dataclass
+class ProbeInput:
+    """The latest accepted pose of one probe topic."""
+
+    topic: str
+    position: np.ndarray | None = None
+    received: Time | None = None
+
+
+@dataclass
+class Schedule:
+    """When an output is next due, in simulated seconds, and how many were dropped."""
+
+    next_time: float = 0.0
+    dropped: int = 0
+
+    def take(self, sim_time: float, rate: float) -> bool:
+        """True if the output is due at ``sim_time``; skipped slots count as dropped."""
+        if rate <= 0 or sim_time + 1e-9 < self.next_time:
+            return False
+        period = 1.0 / rate
+        missed = int((sim_time + 1e-9 - self.next_time) // period)
+        self.dropped += missed
+        self.next_time += (missed + 1) * period
+        return True
+
+
+@dataclass
+class Statistics:
+    """Counters for /diagnostics; the ``window_*`` ones restart at every report."""
+
+    frames_stepped: int = 0
+    slipped_frames: int = 0
+    poses_received: int = 0
+    poses_refused: int = 0
+    tick_errors: int = 0
+    nonfinite_skipped: int = 0
+    resets: int = 0
+    window_step_seconds: float = 0.0
+    window_step_max: float = 0.0
+    window_steps: int = 0
+    window_publish_seconds: float = 0.0
+    window_publishes: int = 0
+    window_started: float = 0.0
+    window_frames: int = 0
+    window_dropped: int = 0
+    window_slipped: int = 0
+    window_refused: int = 0
+    last_real_time_factor: float = 0.0
+    last_step_seconds: float = 0.0
+
+
+def pin_mask(sheet: Sheet, mode: str) -> np.ndarray:
+    """Vertices to pin for ``mode``: none, or the short edge at +y (in material coordinates,
+    so vertices that damage inserts on that edge are clamped too)."""
+    if mode == 'none':
+        return np.zeros(sheet.vertex_count, dtype=bool)
+    if mode == 'short_edge':
+        y = sheet.material[:, 1]
+        top = float(y.max())
+        return y >= top - 1e-9 * max(1.0, abs(top))
+    raise ValueError(f'unknown pin mode {mode!r}')
+
+
+def _descriptor(spec) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    if spec.bounds is not None:
+        low, high = spec.bounds
+        if isinstance(spec.default, bool):
+            pass
+        elif isinstance(spec.default, int):
+            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high),
+                                                     step=1)]
+        else:
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(low), to_value=float(high), step=0.0)]
+    return descriptor
+
+
+class PaperSimNode(Node):
+    """Steps the sheet on a timer and serves it; see the module docstring."""
+
+    def __init__(self, **node_kwargs) -> None:
+        super().__init__(NODE_NAME, **node_kwargs)
+        self._recorder = None
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        self._values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+        try:
+            self._settings = settings_from_values(self._values)
+        except ValueError as error:
+            raise StartupError(f'invalid parameters: {error}') from None
+        settings = self._settings
+
+        self.simulator = Simulator(settings.simulation)
+        self._initial_vertex_count = self.simulator.sheet.vertex_count
+        self._apply_pins()
+        self._appearance = None
+        if PaperAppearance is not None:
+            self._appearance = PaperAppearance(AppearanceConfig(), self.simulator.sheet)
+        self._warm_up()
+
+        self._recorder = self._open_recorder(settings)
+        self._stats = Statistics(window_started=time.monotonic())
+        self._points_schedule = Schedule()
+        self._markers_schedule = Schedule()
+        self._origin_ns: int | None = None
+        self._delete_all_pending = True
+        self._crumple_calls = 0
+
+        self._points_pub = self.create_publisher(PointCloud2, 'paper/points', OUTPUT_QOS)
+        self._markers_pub = self.create_publisher(MarkerArray, 'paper/markers', OUTPUT_QOS)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._probes = [ProbeInput(topic) for topic in settings.probe_topics]
+        self._pose_subscriptions = [
+            self.create_subscription(PoseStamped, topic,
+                                     lambda msg, index=index: self._on_pose(index, msg),
+                                     POSE_QOS)
+            for index, topic in enumerate(settings.probe_topics)]
+        self.create_service(Trigger, 'paper/reset', self._on_reset)
+        self.create_service(Trigger, 'paper/crumple', self._on_crumple)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        self._tick_timer = self.create_timer(1.0 / settings.physics_rate, self._on_tick)
+        self._diagnostics_timer = None
+        self._start_diagnostics_timer()
+        sheet = self.simulator.sheet
+        self.get_logger().info(
+            f'{sheet.vertex_count} vertices, {len(sheet.triangles)} triangles, '
+            f'{sheet.spring_count} springs; solver {settings.simulation.solver.method} at '
+            f'{settings.physics_rate:g} Hz; probes on {", ".join(settings.probe_topics) or "-"}'
+            f' in frame {settings.frame_id!r}; recording: '
+            f'{self._recorder.path if self._recorder is not None else "off"}')
+
+    # ------------------------------------------------------------------------- set-up
+    def _warm_up(self) -> None:
+        """Compile the numba kernels before the first tick: a tiny sheet of the same
+        configuration steps with a probe touching it and the table on."""
+        config = self._settings.simulation
+        tiny = replace(config, sheet=replace(config.sheet, nx=5, ny=5),
+                       contact=replace(config.contact, ground_enabled=True))
+        simulator = Simulator(tiny)
+        center = simulator.sheet.positions.mean(axis=0)
+        simulator.set_probes(center[None, :], np.array([0.01]), np.array([True]))
+        simulator.step_frame()
+        simulator.step_frame()
+        sheet = self.simulator.sheet
+        normals = vertex_normals(sheet.positions, sheet.triangles)
+        self._vertex_colors(sheet, normals)
+
+    def _open_recorder(self, settings: NodeSettings):
+        if not (settings.rerun_path or settings.rerun_connect):
+            return None
+        if RerunRecorder is None:
+            raise StartupError('rerun_path / rerun_connect are set but paper_sim_ros.rerun_logger'
+                               ' is not available in this installation')
+        try:
+            return RerunRecorder('paper_sim_ros', settings.rerun_path or None,
+                                 settings.rerun_connect or None,
+                                 {'node': self.get_fully_qualified_name(),
+                                  'parameters': dict(self._values)})
+        except (OSError, ValueError, RuntimeError) as error:
+            raise StartupError(f'cannot record to Rerun: {error}') from None
+
+    def _start_diagnostics_timer(self) -> None:
+        if self._diagnostics_timer is not None:
+            self.destroy_timer(self._diagnostics_timer)
+        self._diagnostics_timer = self.create_timer(
+            1.0 / self._settings.diagnostics_rate, self._on_diagnostics,
+            clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _apply_pins(self) -> None:
+        self.simulator.set_pinned(pin_mask(self.simulator.sheet, self._settings.pin_mode))
+
+    # ----------------------------------------------------------------------- parameters
+    def _validate_parameters(self, parameters) -> SetParametersResult:
+        """Refuse a change that would make the settings invalid; nothing is applied here."""
+        values = dict(self._values)
+        for parameter in parameters:
+            if parameter.name in PARAMETER_SPECS:
+                values[parameter.name] = parameter.value
+        try:
+            settings_from_values(values)
+        except (ValueError, TypeError) as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters) -> None:
+        """Apply accepted changes (only run-time ones get here: the rest are read-only)."""
+        changed = {parameter.name for parameter in parameters
+                   if parameter.name in PARAMETER_SPECS}
+        if not changed:
+            return
+        for parameter in parameters:
+            if parameter.name in PARAMETER_SPECS:
+                self._values[parameter.name] = parameter.value
+        previous = self._settings
+        self._settings = settings_from_values(self._values)
+        if self._settings.simulation != previous.simulation:
+            # solver iterations and contact settings are read by every step
+            self.simulator.config = self._settings.simulation
+        if self._settings.pin_mode != previous.pin_mode:
+            self._apply_pins()
+        if self._settings.diagnostics_rate != previous.diagnostics_rate:
+            self._start_diagnostics_timer()
+        self.get_logger().info(f'parameters changed: {", ".join(sorted(changed))}')
+
+    # --------------------------------------------------------------------------- probes
+    def _on_pose(self, index: int, msg: PoseStamped) -> None:
+        stats = self._stats
+        stats.poses_received += 1
+        probe = self._probes[index]
+        logger = self.get_logger()
+        position = msg.pose.position
+        orientation = msg.pose.orientation
+        center = np.array([position.x, position.y, position.z])
+        quaternion = (orientation.x, orientation.y, orientation.z, orientation.w)
+        limit = self._settings.simulation.contact.max_probe_distance
+        if msg.header.frame_id != self._settings.frame_id:
+            logger.warn(f'refused pose on {probe.topic}: frame {msg.header.frame_id!r} is not '
+                        f'the sheet frame {self._settings.frame_id!r}',
+                        throttle_duration_sec=WARN_EVERY)
+        elif not (np.isfinite(center).all() and all(map(math.isfinite, quaternion))):
+            logger.warn(f'refused pose on {probe.topic}: not finite (position '
+                        f'{center.tolist()}, orientation {list(quaternion)})',
+                        throttle_duration_sec=WARN_EVERY)
+        elif float(np.linalg.norm(center)) > limit:
+            logger.warn(f'refused pose on {probe.topic}: {np.linalg.norm(center):.3g} m from '
+                        f'the origin, farther than contact.max_probe_distance = {limit:g} m',
+                        throttle_duration_sec=WARN_EVERY)
+        else:
+            probe.position = center
+            probe.received = self.get_clock().now()
+            return
+        stats.poses_refused += 1
+        stats.window_refused += 1
+
+    def _probe_state(self, now: Time) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        count = len(self._probes)
+        centers = np.zeros((count, 3))
+        active = np.zeros(count, dtype=bool)
+        timeout_ns = self._settings.probe_timeout * 1e9
+        for index, probe in enumerate(self._probes):
+            if probe.received is None:
+                continue
+            age_ns = (now - probe.received).nanoseconds if \
+                now.nanoseconds >= probe.received.nanoseconds else -1
+            if 0 <= age_ns <= timeout_ns:
+                centers[index] = probe.position
+                active[index] = True
+        return centers, np.asarray(self._settings.probe_radii, dtype=np.float64), active
+
+    # ------------------------------------------------------------------------- stepping
+    def _on_tick(self) -> None:
+        try:
+            self._tick()
+        except Exception as error:  # noqa: BLE001 - a failing frame must not end the node
+            self._stats.tick_errors += 1
+            self.get_logger().error(f'simulation tick failed: {error!r}',
+                                    throttle_duration_sec=WARN_EVERY)
+
+    def _tick(self) -> None:
+        now = self.get_clock().now()
+        simulator = self.simulator
+        dt = simulator.config.solver.dt
+        dt_ns = dt * 1e9
+        if self._origin_ns is None:
+            self._origin_ns = now.nanoseconds - int(round(simulator.frame * dt_ns))
+            return
+        due = int(math.floor((now.nanoseconds - self._origin_ns) / dt_ns + 0.25)) \
+            - simulator.frame
+        if due < -self._settings.physics_rate:
+            # the clock jumped back by more than a second (a replayed /clock): follow it
+            self.get_logger().warn('clock jumped back; re-basing the simulation clock')
+            self._origin_ns = now.nanoseconds - int(round(simulator.frame * dt_ns))
+            return
+        if due <= 0:
+            return
+        limit = self._settings.max_catchup_frames
+        if due > limit:
+            slipped = due - limit
+            self._origin_ns += int(round(slipped * dt_ns))
+            self._stats.slipped_frames += slipped
+            self._stats.window_slipped += slipped
+            due = limit
+        centers, radii, active = self._probe_state(now)
+        try:
+            simulator.set_probes(centers, radii, active)
+        except ValueError as error:
+            self.get_logger().warn(f'probes ignored this frame: {error}',
+                                   throttle_duration_sec=WARN_EVERY)
+            simulator.set_probes(centers, radii, np.zeros_like(active))
+        stats = self._stats
+        for frame in range(due):
+            started = time.perf_counter()
+            simulator.step_frame()
+            seconds = time.perf_counter() - started
+            stats.frames_stepped += 1
+            stats.window_frames += 1
+            stats.window_steps += 1
+            stats.window_step_seconds += seconds
+            stats.window_step_max = max(stats.window_step_max, seconds)
+            stats.last_step_seconds = seconds
+            if self._recorder is not None and frame < due - 1:
+                self._recorder.log_inputs(self._recording_time(), simulator)
+        self._publish()
+
+    def _recording_time(self) -> float:
+        """Seconds simulated since the node started, across resets (Rerun timeline)."""
+        return self._stats.frames_stepped * self.simulator.config.solver.dt
+
+    def _stamp(self):
+        simulator = self.simulator
+        nanoseconds = self._origin_ns + int(round(simulator.frame
+                                                  * simulator.config.solver.dt * 1e9))
+        return Time(nanoseconds=max(0, nanoseconds),
+                    clock_type=self.get_clock().clock_type).to_msg()
+
+    def _vertex_colors(self, sheet: Sheet, normals: np.ndarray) -> np.ndarray:
+        if self._appearance is not None:
+            return self._appearance.vertex_colors(sheet)
+        return lambert_colors(normals)
+
+    # ------------------------------------------------------------------------ publishing
+    def _publish(self) -> None:
+        settings = self._settings
+        simulator = self.simulator
+        sim_time = simulator.time
+        want_points = self._points_schedule.take(sim_time, settings.publish_rate)
+        want_markers = self._markers_schedule.take(sim_time, settings.markers_rate)
+        recorder = self._recorder
+        if not (want_points or want_markers):
+            if recorder is not None:
+                recorder.log_inputs(self._recording_time(), simulator)
+            return
+        started = time.perf_counter()
+        sheet = simulator.sheet
+        if not (np.isfinite(sheet.positions).all()):
+            self._stats.nonfinite_skipped += 1
+            self.get_logger().error('non-finite sheet state: frame not published',
+                                    throttle_duration_sec=WARN_EVERY)
+            return
+        header = Header(frame_id=settings.frame_id, stamp=self._stamp())
+        normals = vertex_normals(sheet.positions, sheet.triangles)
+        labels = damage_labels(sheet.vertex_count, sheet.spring_vertices, sheet.spring_kind,
+                               self._initial_vertex_count)
+        colors = None
+        if want_points:
+            self._points_pub.publish(create_cloud(header, self._cloud_points(
+                sheet, normals, labels)))
+        if want_markers or recorder is not None:
+            colors = self._vertex_colors(sheet, normals)
+        if want_markers:
+            centers, radii, active = (simulator.probes.end, simulator.probes.radius,
+                                      simulator.probes.active)
+            style = MarkerStyle(hinge_springs=settings.hinge_springs,
+                                aux_springs=settings.aux_springs,
+                                bend_springs=settings.bend_springs)
+            self._markers_pub.publish(sheet_markers(
+                header, sheet.positions, sheet.triangles, colors, sheet.spring_vertices,
+                sheet.spring_kind, centers, radii, active, style,
+                delete_all=self._delete_all_pending))
+            self._delete_all_pending = False
+        if recorder is not None:
+            stats = self._stats
+            recorder.log_frame(self._recording_time(), simulator, vertex_colors=colors,
+                               scalars={'step_time': stats.last_step_seconds,
+                                        'real_time_factor': stats.last_real_time_factor})
+        self._stats.window_publish_seconds += time.perf_counter() - started
+        self._stats.window_publishes += 1
+
+    def _cloud_points(self, sheet: Sheet, normals: np.ndarray, labels: np.ndarray):
+        settings = self._settings
+        rng = np.random.default_rng([settings.noise_seed, self.simulator.frame])
+        if settings.dense_samples > 0:
+            return dense_surface_points(sheet.positions, normals, labels, sheet.triangles,
+                                        settings.dense_samples, settings.noise_stddev, rng)
+        positions = sheet.positions
+        if settings.noise_stddev > 0:
+            positions = positions + rng.normal(0.0, settings.noise_stddev, positions.shape)
+        return sheet_points(positions, normals, labels)
+
+    # -------------------------------------------------------------------------- services
+    def _on_reset(self, request, response):
+        self.simulator.reset()
+        self._initial_vertex_count = self.simulator.sheet.vertex_count
+        self._apply_pins()
+        self._origin_ns = None
+        self._points_schedule = Schedule(dropped=self._points_schedule.dropped)
+        self._markers_schedule = Schedule(dropped=self._markers_schedule.dropped)
+        self._delete_all_pending = True
+        self._crumple_calls = 0
+        self._stats.resets += 1
+        response.success = True
+        response.message = (f'reset to the initial sheet ({self.simulator.sheet.vertex_count} '
+                            'vertices)')
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_crumple(self, request, response):
+        crumple = getattr(self.simulator, 'crumple', None)
+        if crumple is None:
+            response.success = False
+            response.message = 'crumple is not available: this simulation core has no damage'
+            self.get_logger().warn(response.message)
+            return response
+        count = self._settings.crumple_count
+        seed = self._settings.crumple_seed + self._crumple_calls
+        try:
+            crumple(count, seed)
+        except ValueError as error:
+            response.success = False
+            response.message = f'crumple refused: {error}'
+            self.get_logger().warn(response.message)
+            return response
+        self._crumple_calls += 1
+        sheet = self.simulator.sheet
+        response.success = True
+        response.message = (f'crumpled: {count} events, seed {seed}; now '
+                            f'{getattr(self.simulator, "breaks", 0)} breaks, '
+                            f'{getattr(self.simulator, "folds", 0)} folds, '
+                            f'{sheet.vertex_count} vertices')
+        self.get_logger().info(response.message)
+        return response
+
+    # ----------------------------------------------------------------------- diagnostics
+    def _on_diagnostics(self) -> None:
+        stats = self._stats
+        simulator = self.simulator
+        sheet = simulator.sheet
+        wall = time.monotonic()
+        elapsed = max(wall - stats.window_started, 1e-9)
+        dt = simulator.config.solver.dt
+        real_time_factor = stats.window_frames * dt / elapsed
+        stats.last_real_time_factor = real_time_factor
+        dropped = self._points_schedule.dropped + self._markers_schedule.dropped
+        kind = sheet.spring_kind
+        step_mean = stats.window_step_seconds / stats.window_steps if stats.window_steps else 0.0
+        publish_mean = (stats.window_publish_seconds / stats.window_publishes
+                        if stats.window_publishes else 0.0)
+        window_dropped = dropped - stats.window_dropped
+        level = DiagnosticStatus.OK
+        problems = []
+        if stats.window_slipped:
+            problems.append(f'behind real time by {stats.window_slipped} frames')
+        if window_dropped:
+            problems.append(f'{window_dropped} publications dropped')
+        if stats.window_refused:
+            problems.append(f'{stats.window_refused} probe poses refused')
+        if simulator.nan_seen or stats.nonfinite_skipped:
+            problems.append('non-finite state was rolled back')
+        if problems:
+            level = DiagnosticStatus.WARN
+        if stats.tick_errors:
+            level = DiagnosticStatus.ERROR
+            problems.append(f'{stats.tick_errors} failed ticks (see log)')
+        message = '; '.join(problems) if problems else 'running'
+        values = {
+            'sim_time': simulator.time,
+            'frame': simulator.frame,
+            'step_time_ms': 1e3 * step_mean,
+            'step_time_max_ms': 1e3 * stats.window_step_max,
+            'publish_time_ms': 1e3 * publish_mean,
+            'real_time_factor': real_time_factor,
+            'vertices': sheet.vertex_count,
+            'triangles': int(sheet.triangles.shape[0]),
+            'springs': sheet.spring_count,
+            'hinge_springs': int(np.count_nonzero(kind == HINGE)),
+            'bend_springs': int(np.count_nonzero(kind == BEND)),
+            'aux_springs': int(np.count_nonzero(kind == AUX)),
+            'breaks': int(getattr(simulator, 'breaks', 0)),
+            'folds': int(getattr(simulator, 'folds', 0)),
+            'dropped_frames': dropped,
+            'dropped_points': self._points_schedule.dropped,
+            'dropped_markers': self._markers_schedule.dropped,
+            'slipped_frames': stats.slipped_frames,
+            'frames_stepped': stats.frames_stepped,
+            'poses_received': stats.poses_received,
+            'poses_refused': stats.poses_refused,
+            'active_probes': int(np.count_nonzero(simulator.probes.active)),
+            'resets': stats.resets,
+            'nan_rolled_back': bool(simulator.nan_seen),
+            'tick_errors': stats.tick_errors,
+            'recording': self._recorder.path if self._recorder is not None else '',
+        }
+        status = diagnostic_status(DIAGNOSTIC_NAME, self.get_fully_qualified_name(), level,
+                                   message, values)
+        self._diagnostics_pub.publish(diagnostic_array(self.get_clock().now().to_msg(),
+                                                       [status]))
+        stats.window_started = wall
+        stats.window_frames = stats.window_steps = stats.window_publishes = 0
+        stats.window_step_seconds = stats.window_step_max = stats.window_publish_seconds = 0.0
+        stats.window_slipped = stats.window_refused = 0
+        stats.window_dropped = dropped
+
+    # -------------------------------------------------------------------------- shutdown
+    def destroy_node(self) -> None:
+        """Close the Rerun recording (so the file is complete), then the node."""
+        if self._recorder is not None:
+            recorder, self._recorder = self._recorder, None
+            recorder.close()
+        super().destroy_node()
+
+
+def main(args=None) -> int:
+    return run_node(PaperSimNode, args, NODE_NAME, (StartupError, ParameterException))
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,239 @@
+"""The node's parameters: one table, declared once, frozen into the core's config dataclasses.
+
+Every parameter has a description and, where it is a number, a range that rclpy itself
+enforces; ``read_only`` ones are fixed at start-up (the sheet, the solver method, the probe
+topics...). ``settings_from_values`` turns a complete set of values into ``NodeSettings`` or
+raises ``ValueError`` with the reason, which is how run-time changes are validated before
+anything running is touched.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+import math
+from typing import Any, Mapping
+
+from .core import config as core_config
+from .core.config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig, SOLVERS
+
+PIN_MODES = ('none', 'short_edge')
+"""``none``: a free sheet; ``short_edge``: the vertices of the short edge at +y are pinned."""
+
+DamageConfig = getattr(core_config, 'DamageConfig', None)
+"""The damage settings of SPEC §4 (None while the core has no damage yet)."""
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    name: str
+    default: Any
+    description: str
+    bounds: tuple | None = None
+    """(low, high), inclusive; an ``IntegerRange`` or ``FloatingPointRange``."""
+    read_only: bool = False
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """Everything the node runs with, validated."""
+
+    simulation: SimulationConfig
+    frame_id: str
+    physics_rate: float
+    publish_rate: float
+    markers_rate: float
+    diagnostics_rate: float
+    max_catchup_frames: int
+    pin_mode: str
+    probe_topics: tuple
+    probe_radii: tuple
+    """One radius per probe topic [m]."""
+    probe_timeout: float
+    crumple_count: int
+    crumple_seed: int
+    dense_samples: int
+    noise_stddev: float
+    noise_seed: int
+    hinge_springs: bool
+    aux_springs: bool
+    bend_springs: bool
+    rerun_path: str
+    rerun_connect: str
+
+
+_SHEET = SheetConfig()
+_SOLVER = SolverConfig()
+_CONTACT = ContactConfig()
+
+PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('frame_id', 'world', 'Frame of the sheet: of every published header, and the '
+                  'only frame accepted for probe poses.', read_only=True),
+    ParameterSpec('physics_rate', 60.0, 'Simulation frames per second of simulated time; one '
+                  'frame steps dt = 1 / physics_rate [Hz].', (1.0, 1000.0), read_only=True),
+    ParameterSpec('publish_rate', 30.0, 'Rate of paper/points in simulated time [Hz]; 0: off.',
+                  (0.0, 1000.0)),
+    ParameterSpec('markers_rate', 5.0, 'Rate of paper/markers in simulated time [Hz]; 0: off. '
+                  'Markers are the expensive output (one Python object per point).',
+                  (0.0, 1000.0)),
+    ParameterSpec('diagnostics_rate', 1.0, 'Rate of /diagnostics in wall-clock time [Hz].',
+                  (0.1, 100.0)),
+    ParameterSpec('max_catchup_frames', 4, 'Frames stepped in one timer tick to catch up with '
+                  'the clock; beyond that the simulation slips (real-time factor < 1, reported '
+                  'in diagnostics). Publishing is what is dropped first, never physics frames.',
+                  (1, 1000)),
+    ParameterSpec('seed', 0, 'Seed of every random draw of the simulation (damage, crumple).',
+                  (0, 2**62), read_only=True),
+    ParameterSpec('sheet.width', _SHEET.width, 'Sheet extent along x [m].', (0.01, 10.0),
+                  read_only=True),
+    ParameterSpec('sheet.height', _SHEET.height, 'Sheet extent along y [m].', (0.01, 10.0),
+                  read_only=True),
+    ParameterSpec('sheet.nx', _SHEET.nx, 'Vertices along x (2^N + 1 is natural).', (3, 1025),
+                  read_only=True),
+    ParameterSpec('sheet.ny', _SHEET.ny, 'Vertices along y (2^N + 1 is natural).', (3, 1025),
+                  read_only=True),
+    ParameterSpec('sheet.grammage', _SHEET.grammage, 'Areal density [kg/m^2].', (0.001, 10.0),
+                  read_only=True),
+    ParameterSpec('sheet.stretch_stiffness', _SHEET.stretch_stiffness,
+                  'In-plane stiffness E*t of HINGE springs [N/m].', (1.0, 1.0e9),
+                  read_only=True),
+    ParameterSpec('sheet.bend_stiffness', _SHEET.bend_stiffness,
+                  'BEND spring stiffness at the reference cell size [N/m].', (1.0e-6, 1.0e6),
+                  read_only=True),
+    ParameterSpec('sheet.aux_stiffness', _SHEET.aux_stiffness,
+                  'Stiffness of AUX (damage memory) springs [N/m].', (1.0e-3, 1.0e9),
+                  read_only=True),
+    ParameterSpec('sheet.elevation', 0.0, 'Height of the flat initial sheet [m].',
+                  (-100.0, 100.0), read_only=True),
+    ParameterSpec('solver.method', _SOLVER.method, f'Integrator, one of {", ".join(SOLVERS)}.',
+                  read_only=True),
+    ParameterSpec('solver.substeps', _SOLVER.substeps, 'Integration sub-steps per frame.',
+                  (1, 10000)),
+    ParameterSpec('solver.jacobi_iterations', _SOLVER.jacobi_iterations,
+                  'Jacobi iterations of Eq. 6 per sub-step.', (0, 100000)),
+    ParameterSpec('solver.constraint_iterations', _SOLVER.constraint_iterations,
+                  "Strain-limiting sweeps per sub-step ('constrained' method).", (0, 10000)),
+    ParameterSpec('contact.ground_enabled', True, 'A table (ground plane) under the sheet.'),
+    ParameterSpec('contact.ground_height', 0.0, 'Height of the table [m].', (-100.0, 100.0)),
+    ParameterSpec('contact.ground_friction', _CONTACT.ground_friction,
+                  'Friction coefficient of the table.', (0.0, 10.0)),
+    ParameterSpec('contact.probe_friction', _CONTACT.probe_friction,
+                  'Friction coefficient of the probes.', (0.0, 10.0)),
+    ParameterSpec('contact.max_probe_distance', 10.0, 'Probe poses farther than this from the '
+                  "origin of frame_id are refused as absurd [m].", (0.01, 1.0e6)),
+    ParameterSpec('pin_mode', 'none', f'Pinned vertices, one of {", ".join(PIN_MODES)} '
+                  '(short_edge: the short edge at +y is clamped).'),
+    ParameterSpec('probe_topics', ['probe/pose'], 'geometry_msgs/PoseStamped topics, one '
+                  'sphere probe each.', read_only=True),
+    ParameterSpec('probe_radii', [0.02], 'Radius of each probe [m]: one per topic, or one for '
+                  'all.'),
+    ParameterSpec('probe_timeout', 0.5, 'A probe without a new pose for this long stops acting '
+                  'on the sheet [s].', (0.001, 3600.0)),
+    ParameterSpec('crumple_count', 20, 'Random damage events of one paper/crumple call.',
+                  (0, 1000000)),
+    ParameterSpec('crumple_seed', 0, 'Seed of paper/crumple (the n-th call uses seed + n).',
+                  (0, 2**62)),
+    ParameterSpec('points.dense_samples', 0, 'Random samples per triangle in paper/points; 0: '
+                  'the vertices themselves.', (0, 64)),
+    ParameterSpec('points.noise_stddev', 0.0, 'Gaussian noise on published point positions, '
+                  'like a depth sensor [m].', (0.0, 0.05)),
+    ParameterSpec('points.noise_seed', 0, 'Seed of the sampling and noise (with the frame '
+                  'number: the same seed gives the same clouds).', (0, 2**62)),
+    ParameterSpec('markers.hinge_springs', True, 'Draw HINGE springs (mesh edges).'),
+    ParameterSpec('markers.aux_springs', True, 'Draw AUX springs (creases and folds).'),
+    ParameterSpec('markers.bend_springs', False, 'Draw BEND springs.'),
+    ParameterSpec('rerun_path', '', "Record every published frame to this .rrd file; '' : off.",
+                  read_only=True),
+    ParameterSpec('rerun_connect', '', "Stream to a Rerun viewer at this URL "
+                  "(rerun+http://127.0.0.1:9876/proxy); '': off.", read_only=True),
+)
+
+_DAMAGE_DESCRIPTIONS = {
+    'enabled': ('Breaks and folds happen (SPEC section 4).', None),
+    'fragility': ('phi of Eq. 7: large is rubbery, small is fragile.', (1e-6, 100.0)),
+    'area_conservation': ('psi of Eq. 8.', (0.0, 2.0)),
+    'fold_threshold': ('An interior edge folds when |x_r - x_l| / d0 falls below this.',
+                       (0.0, 0.999)),
+    'max_vertices': ('Vertex cap: damage stops there.', (9, 10000000)),
+}
+if DamageConfig is not None:
+    _DAMAGE = DamageConfig()
+    PARAMETERS += tuple(
+        ParameterSpec(f'damage.{name}', getattr(_DAMAGE, name), description, bounds,
+                      read_only=True)
+        for name, (description, bounds) in _DAMAGE_DESCRIPTIONS.items()
+        if name in {f.name for f in fields(DamageConfig)})
+
+PARAMETER_NAMES = tuple(spec.name for spec in PARAMETERS)
+PARAMETER_SPECS = {spec.name: spec for spec in PARAMETERS}
+
+
+def _section(values: Mapping[str, Any], prefix: str) -> dict:
+    return {name[len(prefix):]: value for name, value in values.items()
+            if name.startswith(prefix)}
+
+
+def _rate(values: Mapping[str, Any], name: str) -> float:
+    rate = float(values[name])
+    if not (math.isfinite(rate) and rate >= 0):
+        raise ValueError(f'{name} must be finite and >= 0, got {rate}')
+    return rate
+
+
+def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
+    """Validate a complete set of parameter values; ValueError names what is wrong."""
+    missing = [name for name in PARAMETER_NAMES if name not in values]
+    if missing:
+        raise ValueError(f'missing parameters: {", ".join(missing)}')
+    frame_id = str(values['frame_id']).strip()
+    if not frame_id:
+        raise ValueError('frame_id must not be empty')
+    physics_rate = float(values['physics_rate'])
+    if not (math.isfinite(physics_rate) and physics_rate > 0):
+        raise ValueError(f'physics_rate must be > 0, got {physics_rate}')
+    solver = _section(values, 'solver.')
+    solver['dt'] = 1.0 / physics_rate
+    simulation = {
+        'sheet': core_config.from_mapping(SheetConfig, _section(values, 'sheet.')),
+        'solver': core_config.from_mapping(SolverConfig, solver),
+        'contact': core_config.from_mapping(ContactConfig, _section(values, 'contact.')),
+        'seed': int(values['seed']),
+    }
+    if DamageConfig is not None:
+        simulation['damage'] = core_config.from_mapping(DamageConfig,
+                                                        _section(values, 'damage.'))
+    pin_mode = str(values['pin_mode'])
+    if pin_mode not in PIN_MODES:
+        raise ValueError(f'pin_mode must be one of {", ".join(PIN_MODES)}, got {pin_mode!r}')
+    topics = tuple(str(topic) for topic in values['probe_topics'])
+    if any(not topic.strip() for topic in topics) or len(set(topics)) != len(topics):
+        raise ValueError(f'probe_topics must be distinct, non-empty names, got {list(topics)}')
+    radii = tuple(float(radius) for radius in values['probe_radii'])
+    if len(radii) == 1 and len(topics) > 1:
+        radii = radii * len(topics)
+    if topics and len(radii) != len(topics):
+        raise ValueError(f'probe_radii needs one radius per probe topic ({len(topics)}) or one '
+                         f'for all, got {len(radii)}')
+    if any(not (math.isfinite(radius) and 0 < radius <= 10.0) for radius in radii):
+        raise ValueError(f'probe radii must be in (0, 10] m, got {list(radii)}')
+    return NodeSettings(
+        simulation=SimulationConfig(**simulation),
+        frame_id=frame_id,
+        physics_rate=physics_rate,
+        publish_rate=_rate(values, 'publish_rate'),
+        markers_rate=_rate(values, 'markers_rate'),
+        diagnostics_rate=_rate(values, 'diagnostics_rate'),
+        max_catchup_frames=int(values['max_catchup_frames']),
+        pin_mode=pin_mode,
+        probe_topics=topics,
+        probe_radii=radii[:len(topics)],
+        probe_timeout=float(values['probe_timeout']),
+        crumple_count=int(values['crumple_count']),
+        crumple_seed=int(values['crumple_seed']),
+        dense_samples=int(values['points.dense_samples']),
+        noise_stddev=float(values['points.noise_stddev']),
+        noise_seed=int(values['points.noise_seed']),
+        hinge_springs=bool(values['markers.hinge_springs']),
+        aux_springs=bool(values['markers.aux_springs']),
+        bend_springs=bool(values['markers.bend_springs']),
+        rerun_path=str(values['rerun_path']),
+        rerun_connect=str(values['rerun_connect']),
+    )

@@ -1,0 +1,30 @@
+"""The `main` of every executable of this package, after the Jazzy demo_nodes_py skeleton."""
+from __future__ import annotations
+
+from typing import Callable
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+
+def run_node(factory: Callable[[], Node], args=None, name: str = 'paper_sim',
+             startup_errors: tuple[type[BaseException], ...] = ()) -> int:
+    """Init rclpy, build the node and spin it until Ctrl-C / SIGTERM / shutdown; always
+    destroy the node and shut down. A ``startup_errors`` exception raised while building the
+    node is logged as one fatal line (no traceback) and gives exit status 1."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except startup_errors as error:
+        rclpy.logging.get_logger(name).fatal(f'cannot start: {error}')
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
