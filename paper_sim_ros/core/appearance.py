@@ -21,7 +21,9 @@ full-detail normals shade.
 Decisions where the paper is silent:
 - Lighting is two-sided Lambert with an ambient term, ``ambient + (1 − ambient)·|n·l|``:
   paper is thin and the side the viewer sees is the side the light reaches (a flap folded
-  over faces up even though its mesh normal faces down).
+  over faces up even though its mesh normal faces down). It is divided by the brightness of
+  a sheet lying flat, so flat paper keeps the texture's own white (an exposure set for
+  the table) and the light only adds relief; colours above white clip.
 - "Blend" is modulation (OpenGL ``GL_MODULATE``): colour = lit × texture; ``texture_blend``
   mixes the texture with white first (0: plain white paper).
 - Texture rows run from the sheet's top edge (v = 0, material y = +height/2) downwards.
@@ -34,7 +36,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .fractal import bilinear_upsample, grid_exponent, lowpass_filter
+from .fractal import grid_exponent, lowpass_filter
 from .sheet import Sheet, grid_triangles
 
 FULL_DETAIL_LEVEL = 16
@@ -56,7 +58,7 @@ class AppearanceConfig:
     normal_level: int = 2
     """Fractal level (iterations) whose normals light the surface (paper Fig. 10 c: 2,
     d: 4); ``FULL_DETAIL_LEVEL`` or any value above the grid's N: full-detail normals."""
-    light_direction: tuple = (0.35, 0.45, 1.0)
+    light_direction: tuple = (0.6, 0.8, 0.7)
     """Direction towards the light (need not be unit length), in the sheet's frame."""
     ambient: float = 0.3
     """Share of the brightness that does not depend on the light, in [0, 1]."""
@@ -105,37 +107,36 @@ def _smooth_noise(rng: np.random.Generator, rows: int, columns: int, exponent: f
 
 
 def _fibres(rng: np.random.Generator, rows: int, columns: int) -> np.ndarray:
-    """Density of short, gently curved fibres, blurred: (rows, columns) in [0, ~1]."""
+    """Density of short, gently curved fibres: (rows, columns), about 1 on a fibre."""
     scale = max(rows, columns) / 512.0
-    count = int(2200 * scale * scale)
-    samples = 48
-    length = rng.uniform(8.0, 40.0, count) * scale
+    count = int(6000 * scale * scale)
+    samples = 32
+    length = rng.uniform(5.0, 25.0, count) * scale
     heading = rng.uniform(0.0, math.pi, count)
-    bend = rng.normal(0.0, 1.2, count)
+    bend = rng.normal(0.0, 1.0, count)
     t = np.linspace(-0.5, 0.5, samples)[None, :]
     angle = heading[:, None] + bend[:, None] * t
     step = (length / samples)[:, None]
     x = np.cumsum(step * np.cos(angle), axis=1) + rng.uniform(0, columns, count)[:, None]
     y = np.cumsum(step * np.sin(angle), axis=1) + rng.uniform(0, rows, count)[:, None]
-    weight = np.repeat(rng.uniform(0.4, 1.0, count), samples)
+    weight = np.repeat(rng.uniform(0.2, 1.0, count) / max(samples * 1.0 / 32, 1.0), samples)
     index = (np.mod(np.rint(y).astype(np.int64), rows) * columns
              + np.mod(np.rint(x).astype(np.int64), columns)).ravel()
     density = np.bincount(index, weights=weight, minlength=rows * columns)
-    density = density.reshape(rows, columns)
-    if min(rows, columns) > 3:
-        density = lowpass_filter(density)
-    return density / max(float(np.percentile(density, 99.9)), 1e-12)
+    return np.minimum(density.reshape(rows, columns), 1.5)
 
 
 def procedural_paper_texture(rows: int, columns: int, seed: int) -> np.ndarray:
-    """A generated paper texture, (rows, columns, 3) uint8: warm off-white with cloudy
-    formation (the uneven fibre density of real paper), darker fibres and fine grain."""
+    """A generated paper texture, (rows, columns, 3) uint8: warm off-white with the
+    formation of real paper (uneven fibre density: flocs of a few mm, faint large clouds),
+    scattered fibres and fine grain. Periodic, seeded, no files."""
     rng = np.random.default_rng(seed)
-    formation = _smooth_noise(rng, rows, columns, 1.6, 2.0)
+    flocs = _smooth_noise(rng, rows, columns, 1.0, max(rows, columns) / 24.0)
+    clouds = _smooth_noise(rng, rows, columns, 2.0, 1.0)
     grain = _smooth_noise(rng, rows, columns, 0.0, 0.0)
     fibres = _fibres(rng, rows, columns)
-    brightness = 1.0 + 0.035 * formation + 0.012 * grain - 0.09 * np.clip(fibres, 0.0, 1.5)
-    tint = np.array([0.965, 0.955, 0.925])
+    brightness = 1.0 + 0.018 * flocs + 0.012 * clouds + 0.008 * grain - 0.035 * fibres
+    tint = np.array([0.975, 0.965, 0.935])
     image = brightness[..., None] * tint[None, None, :]
     return np.clip(np.rint(255.0 * image), 0, 255).astype(np.uint8)
 
@@ -234,6 +235,27 @@ def _bilinear_kernel(grid: np.ndarray, x: np.ndarray, y: np.ndarray, out: np.nda
             out[v, channel] = top * (1.0 - fy) + bottom * fy
 
 
+@njit(cache=True)
+def _apply_tilt_kernel(tilt_grid: np.ndarray, x: np.ndarray, y: np.ndarray,
+                       tangent: np.ndarray, bitangent: np.ndarray, normal: np.ndarray,
+                       out: np.ndarray) -> None:
+    """out[v] = the tilt looked up bilinearly at grid column x[v], row y[v], expressed in the
+    frame (tangent, bitangent, normal) of vertex v, normalised (the plain normal where the
+    result is degenerate)."""
+    tilt = np.empty((1, 3))
+    for v in range(x.shape[0]):
+        _bilinear_kernel(tilt_grid, x[v:v + 1], y[v:v + 1], tilt)
+        a, b, c = tilt[0, 0], tilt[0, 1], tilt[0, 2]
+        ox = a * tangent[v, 0] + b * bitangent[v, 0] + c * normal[v, 0]
+        oy = a * tangent[v, 1] + b * bitangent[v, 1] + c * normal[v, 1]
+        oz = a * tangent[v, 2] + b * bitangent[v, 2] + c * normal[v, 2]
+        length = math.sqrt(ox * ox + oy * oy + oz * oz)
+        if length > 1e-12 and length < math.inf:
+            out[v, 0], out[v, 1], out[v, 2] = ox / length, oy / length, oz / length
+        else:
+            out[v, 0], out[v, 1], out[v, 2] = normal[v, 0], normal[v, 1], normal[v, 2]
+
+
 def bilinear_sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """(V, K) float64 samples of a (rows, columns, K) grid at fractional column ``x`` and
     row ``y`` (clamped to the grid)."""
@@ -254,13 +276,6 @@ def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
         image = image.astype(np.float32) / np.float32(255.0)
     uv = np.asarray(uv, dtype=np.float64)
     return bilinear_sample(image, uv[:, 0] * (columns - 1), uv[:, 1] * (rows - 1))
-
-
-def _normalise(vectors: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """Unit rows of ``vectors``; ``fallback`` rows where a row is zero or not finite."""
-    length = np.linalg.norm(vectors, axis=1)
-    good = np.isfinite(length) & (length > 1e-30)
-    return np.where(good[:, None], vectors / np.where(good, length, 1.0)[:, None], fallback)
 
 
 def local_frames(positions: np.ndarray, material: np.ndarray,
@@ -293,17 +308,45 @@ def _grid_side(sheet: Sheet) -> int | None:
     return side if np.allclose(sheet.material, expected, rtol=0.0, atol=tolerance) else None
 
 
+def catmull_rom_weights(cells: int, stride: int) -> np.ndarray:
+    """((cells·stride + 1), cells + 1) weights of the C¹ Catmull–Rom spline through
+    ``cells + 1`` equally spaced samples, the ends extrapolated linearly (so a linear
+    function is reproduced exactly)."""
+    t = np.arange(cells * stride + 1) / stride
+    segment = np.minimum(t.astype(np.int64), cells - 1)
+    f = t - segment
+    f2, f3 = f * f, f * f * f
+    basis = np.stack([-0.5 * f3 + f2 - 0.5 * f, 1.5 * f3 - 2.5 * f2 + 1.0,
+                      -1.5 * f3 + 2.0 * f2 + 0.5 * f, 0.5 * f3 - 0.5 * f2], axis=1)
+    # samples −1 and cells + 1 are linear extrapolations of their neighbours
+    extended = np.zeros((cells + 3, cells + 1))
+    extended[1:-1] = np.eye(cells + 1)
+    extended[0, 0], extended[0, 1] = 2.0, -1.0
+    extended[-1, -1], extended[-1, -2] = 2.0, -1.0
+    weights = np.zeros((t.size, cells + 1))
+    for k in range(4):
+        weights += basis[:, k:k + 1] * extended[segment + k]
+    return weights
+
+
 def level_surface(grid_positions: np.ndarray, level: int) -> np.ndarray:
-    """The ``(n, n, 3)`` grid surface at the resolution of fractal level ``level``: its
-    vertices on the lattice of iteration ``level − 1`` (spacing ``2^(N−level+1)``), bilinear
-    in between, then low-pass filtered (keeping linear trends at the border)."""
+    """The ``(n, n, 3)`` grid surface at the resolution of fractal level ``level``: sampled
+    on the lattice of iteration ``level − 1`` (spacing ``2^(N−level+1)``), interpolated
+    back with a C¹ Catmull–Rom spline and low-pass filtered (keeping linear trends at the
+    border).
+
+    Decision: the paper's intermediate surface is bilinear between the lattice vertices,
+    but the seams of bilinear patches show in the shading as straight light/dark lines
+    along the lattice (rendered for comparison by tools/render_docs_pictures.py); the
+    spline keeps the level's resolution without the seams."""
     exponent = grid_exponent(grid_positions.shape[0])
     if not 1 <= level <= exponent:
         raise ValueError(f'level must be in [1, {exponent}], got {level}')
     stride = 1 << (exponent - level + 1)
     coarse = grid_positions[::stride, ::stride]
-    return np.stack([lowpass_filter(bilinear_upsample(coarse[..., axis], stride),
-                                    keep_slope=True) for axis in range(3)], axis=-1)
+    weights = catmull_rom_weights(coarse.shape[0] - 1, stride)
+    return np.stack([lowpass_filter(weights @ coarse[..., axis] @ weights.T, keep_slope=True)
+                     for axis in range(3)], axis=-1)
 
 
 # ------------------------------------------------------------------------------ appearance
@@ -324,6 +367,7 @@ class PaperAppearance:
         self._texture_float = self._texture.astype(np.float32) / np.float32(255.0)
         light = np.asarray(config.light_direction, dtype=np.float64)
         self._light = light / np.linalg.norm(light)
+        self._flat_light = config.ambient + (1.0 - config.ambient) * abs(self._light[2])
         self._width = sheet.width
         self._height = sheet.height
         self._tilt_grid = self._level_tilt(sheet)
@@ -354,11 +398,11 @@ class PaperAppearance:
                          for frame in (tangent, bitangent, normal)], axis=1)
         return tilt.reshape(side, side, 3)
 
-    def _tilt_at(self, material: np.ndarray) -> np.ndarray:
-        """Bilinear lookup of the stored tilt at material coordinates (V, 2)."""
+    def _grid_coordinates(self, material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Fractional (column, row) of material coordinates on the stored tilt grid."""
         cells = self._tilt_grid.shape[0] - 1
-        return bilinear_sample(self._tilt_grid, (material[:, 0] / self._width + 0.5) * cells,
-                               (material[:, 1] / self._height + 0.5) * cells)
+        return ((material[:, 0] / self._width + 0.5) * cells,
+                (material[:, 1] / self._height + 0.5) * cells)
 
     def shading_normals(self, sheet: Sheet) -> np.ndarray:
         """(V, 3) unit normals that light the sheet: the intermediate-level normals carried
@@ -367,19 +411,26 @@ class PaperAppearance:
                                                   sheet.triangles)
         if self._tilt_grid is None:
             return normal
-        tilt = self._tilt_at(sheet.material)
-        shaded = tilt[:, 0:1] * tangent + tilt[:, 1:2] * bitangent + tilt[:, 2:3] * normal
-        return _normalise(shaded, normal)
+        x, y = self._grid_coordinates(np.asarray(sheet.material, dtype=np.float64))
+        shaded = np.empty_like(normal)
+        _apply_tilt_kernel(self._tilt_grid, x, y, tangent, bitangent, normal, shaded)
+        return shaded
+
+    def vertex_light(self, sheet: Sheet) -> np.ndarray:
+        """(V,) brightness of the white surface: two-sided Lambert with ``shading_normals``
+        plus ambient, relative to a sheet lying flat (normal +z), which shows its texture
+        unchanged (1.0); slopes facing the light are brighter (up to 1/flat), slopes
+        facing away darker (down to ambient/flat)."""
+        ambient = self.config.ambient
+        lit = ambient + (1.0 - ambient) * np.abs(self.shading_normals(sheet) @ self._light)
+        return lit / self._flat_light
 
     def vertex_colors(self, sheet: Sheet) -> np.ndarray:
-        """(V, 3) uint8 colours: the white surface lit with ``shading_normals`` (two-sided
-        Lambert plus ambient), modulated by the texture at the vertices' texture
-        coordinates. Works for any vertex count; never NaN."""
-        normals = self.shading_normals(sheet)
-        ambient = self.config.ambient
-        light = ambient + (1.0 - ambient) * np.abs(normals @ self._light)
+        """(V, 3) uint8 colours: the white surface lit (``vertex_light``), modulated by the
+        texture at the vertices' texture coordinates. Works for any vertex count; never
+        NaN."""
         texture = sample_texture(self._texture_float, sheet.texture_coordinates())
         blend = self.config.texture_blend
-        base = blend * texture + (1.0 - blend)
-        colors = np.nan_to_num(255.0 * light[:, None] * base, nan=255.0 * ambient)
+        colors = (255.0 * self.vertex_light(sheet))[:, None] * (blend * texture + (1.0 - blend))
+        colors = np.nan_to_num(colors, nan=255.0 * self.config.ambient)
         return np.clip(np.rint(colors), 0, 255).astype(np.uint8)
