@@ -1,0 +1,66 @@
+"""`colcon build` of the package into a temporary directory, and the installed executable."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import subprocess
+import sys
+
+from sensor_msgs.msg import PointCloud2
+
+from ros_harness import REPO, RosClient, new_domain_id, ros_env, start_node
+
+COLCON = Path(sys.executable).parent / 'colcon'
+
+
+def test_colcon_build_installs_a_runnable_node(tmp_path):
+    assert COLCON.exists(), f'colcon is not installed next to {sys.executable} (make setup)'
+    leftovers = [REPO / name for name in ('build', 'install', 'log')]
+    existed = {path: path.exists() for path in leftovers}
+    result = subprocess.run(
+        [str(COLCON), '--log-base', str(tmp_path / 'log'), 'build',
+         '--base-paths', str(REPO), '--packages-select', 'paper_sim_ros',
+         '--build-base', str(tmp_path / 'build'), '--install-base', str(tmp_path / 'install'),
+         '--event-handlers', 'console_direct-'],
+        cwd=str(tmp_path), capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    for path in leftovers:
+        assert path.exists() == existed[path], f'the build wrote {path} into the repository'
+
+    prefix = tmp_path / 'install' / 'paper_sim_ros'
+    share = prefix / 'share' / 'paper_sim_ros'
+    for relative in ('lib/paper_sim_ros/paper_sim_node',
+                     'lib/paper_sim_ros/paper_sim_scripted_probe',
+                     'share/ament_index/resource_index/packages/paper_sim_ros',
+                     'share/paper_sim_ros/package.xml',
+                     'share/paper_sim_ros/config/paper_sim.yaml',
+                     'share/paper_sim_ros/config/paper_sim.rviz',
+                     'share/paper_sim_ros/launch/paper_sim.launch.py'):
+        assert (prefix / relative).exists(), f'{relative} not installed'
+    site = next(prefix.glob('lib/python3*/site-packages'))
+    assert (site / 'paper_sim_ros' / 'msg_adapters' / 'markers.py').exists()
+    assert not (site / 'msg_adapters').exists(), 'msg_adapters installed as a global package'
+
+    env_extra = {'PYTHONPATH': os.pathsep.join([str(site), os.environ.get('PYTHONPATH', '')]),
+                 'AMENT_PREFIX_PATH': str(prefix)}
+    where = subprocess.run([sys.executable, '-c', 'import paper_sim_ros.node as n; '
+                            'print(n.__file__)'], env=ros_env(0, env_extra), cwd=str(tmp_path),
+                           capture_output=True, text=True, timeout=60)
+    assert where.stdout.strip().startswith(str(site)), where.stdout + where.stderr
+
+    domain = new_domain_id()
+    process = start_node(tmp_path, {'sheet.nx': 9, 'sheet.ny': 9},
+                         domain_id=domain, params_file=share / 'config' / 'paper_sim.yaml',
+                         executable=[str(prefix / 'lib' / 'paper_sim_ros' / 'paper_sim_node')],
+                         env_extra=env_extra, name='installed')
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        client.spin_until(lambda: client.latest('paper/points') is not None, 60,
+                          'a cloud from the installed node', process)
+        assert client.latest('paper/points').width == 81
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.output()[-3000:]
+    assert 'Traceback' not in process.output()

@@ -1,0 +1,129 @@
+"""Starting and stopping the node process: signals, start-up errors, recording, /clock."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+
+import numpy as np
+import pytest
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import PointCloud2
+
+from ros_harness import (CONFIG, PYTHON, RosClient, cloud_positions, new_domain_id, overrides,
+                         ros_env)
+from ros_harness import start_node
+
+SMALL = {'sheet.nx': 9, 'sheet.ny': 9, 'publish_rate': 10.0, 'markers_rate': 2.0}
+
+
+def wait_for_cloud(client: RosClient, process, timeout: float = 60.0) -> PointCloud2:
+    client.spin_until(lambda: client.latest('paper/points') is not None, timeout,
+                      'a point cloud', process)
+    return client.latest('paper/points')
+
+
+def run_to_completion(tmp_path, parameters: dict, timeout: float = 60.0):
+    command = [PYTHON, '-m', 'paper_sim_ros.node', '--ros-args', '--params-file', str(CONFIG)] \
+        + overrides(parameters)
+    return subprocess.run(command, env=ros_env(new_domain_id()), cwd=str(tmp_path),
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM],
+                         ids=['SIGINT', 'SIGTERM'])
+def test_signal_ends_the_node_cleanly_and_completes_the_recording(tmp_path, signal_number):
+    recording = tmp_path / 'session.rrd'
+    domain = new_domain_id()
+    process = start_node(tmp_path, {**SMALL, 'rerun_path': str(recording)}, domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        wait_for_cloud(client, process)
+        client.spin_for(1.0)
+    finally:
+        client.close()
+    code = process.stop(signal_number)
+    output = process.output()
+    assert code == 0, f'exit status {code}:\n{output[-3000:]}'
+    assert 'Traceback' not in output, output[-3000:]
+    from rerun.chunk import RrdReader
+    from paper_sim_ros.rerun_replay import read_mesh_frames
+    RrdReader(str(recording)).store()  # needs the footer: the recording was finished
+    frames = read_mesh_frames(str(recording))
+    assert len(frames) >= 5, f'only {len(frames)} frames recorded'
+    assert all(np.isfinite(frame.positions).all() for frame in frames)
+    assert frames[0].positions.shape == (81, 3)
+
+
+def test_an_unwritable_recording_path_is_a_clear_startup_error(tmp_path):
+    result = run_to_completion(tmp_path, {**SMALL,
+                                          'rerun_path': str(tmp_path / 'missing' / 'x.rrd')})
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert 'cannot start: cannot record to Rerun' in result.stderr
+    assert 'does not exist' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_an_out_of_range_parameter_file_value_is_a_clear_startup_error(tmp_path):
+    result = run_to_completion(tmp_path, {**SMALL, 'publish_rate': -3.0})
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert 'cannot start' in result.stderr and 'publish_rate' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_an_inconsistent_parameter_set_is_a_clear_startup_error(tmp_path):
+    result = run_to_completion(tmp_path, {**SMALL, 'probe_radii': [0.01, 0.02]})
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert 'one radius per probe topic' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_use_sim_time_follows_clock(tmp_path):
+    """With use_sim_time the node steps only while /clock advances, and stamps its outputs
+    with /clock time."""
+    domain = new_domain_id()
+    process = start_node(tmp_path, {**SMALL, 'use_sim_time': True}, domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        clock_publisher = client.node.create_publisher(
+            Clock, '/clock', QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        start = 1000.0
+        sim_seconds = [0.0]
+
+        def tick():  # 100 Hz of /clock at 1x
+            sim_seconds[0] += 0.01
+            stamp = start + sim_seconds[0]
+            message = Clock()
+            message.clock.sec = int(stamp)
+            message.clock.nanosec = int(round((stamp - int(stamp)) * 1e9))
+            clock_publisher.publish(message)
+
+        last = [0.0]
+
+        def every():
+            if time.monotonic() - last[0] >= 0.01:
+                tick()
+                last[0] = time.monotonic()
+        end = time.monotonic() + 60.0
+        while client.latest('paper/points') is None and time.monotonic() < end:
+            assert process.alive(), process.output()[-3000:]
+            client.spin_for(0.05, every)
+        assert client.latest('paper/points') is not None, 'no cloud under /clock'
+        client.spin_for(1.0, every)
+        cloud = client.latest('paper/points')
+        stamp = cloud.header.stamp.sec + 1e-9 * cloud.header.stamp.nanosec
+        assert start < stamp <= start + sim_seconds[0] + 1e-6, \
+            f'stamp {stamp} is not /clock time (now {start + sim_seconds[0]})'
+        # /clock stops: the simulation stops with it
+        client.spin_for(0.5)
+        frozen = len(client.received['paper/points'])
+        client.spin_for(1.0)
+        assert len(client.received['paper/points']) == frozen, 'stepped without /clock'
+        assert np.isfinite(cloud_positions(cloud)).all()
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.output()[-3000:]
