@@ -5,8 +5,10 @@
 For each grid it steps a sheet under a pressing probe for a few frames, then times (best of
 ``--repeat``) what the node does per published frame: normals and damage labels, the vertex
 colours, building the PointCloud2 and the MarkerArray, and serialising each the way
-``publish`` does (rclpy.serialization.serialize_message, the same C conversion). It also
-compares ways of building the ``geometry_msgs/Point`` list of ``Marker.points``.
+``publish`` does (rclpy.serialization.serialize_message, the same C conversion). Markers two
+ways: as message objects (one Python object per point, then serialised), and as CDR bytes
+written by numpy (``sheet_markers_cdr``, what the node publishes; serialising is building).
+It also compares ways of building the ``geometry_msgs/Point`` list of ``Marker.points``.
 """
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ from visualization_msgs.msg import Marker
 from paper_sim_ros.core.config import SheetConfig, SimulationConfig
 from paper_sim_ros.core.simulator import Simulator
 from paper_sim_ros.core.topology import vertex_normals
-from paper_sim_ros.msg_adapters.markers import MarkerStyle, sheet_markers
+from paper_sim_ros.msg_adapters.markers import MarkerStyle, sheet_markers, sheet_markers_cdr
 from paper_sim_ros.msg_adapters.point_cloud import create_cloud, sheet_points
 from paper_sim_ros.msg_adapters.surface import damage_labels, lambert_colors
 
@@ -104,17 +106,19 @@ def bench_grid(grid: int, repeat: int) -> None:
     cloud_serialize, cloud_bytes = best_of(repeat, lambda: serialize_message(cloud))
     probes = simulator.probes
 
-    def markers(style):
-        return sheet_markers(header, sheet.positions, sheet.triangles, colors,
-                             sheet.spring_vertices, sheet.spring_kind, probes.end,
-                             probes.radius, probes.active, style)
+    def arguments(style):
+        return (header, sheet.positions, sheet.triangles, colors, sheet.spring_vertices,
+                sheet.spring_kind, probes.end, probes.radius, probes.active, style)
     rows = []
     for label, style in (('surface + hinge + aux', MarkerStyle()),
                          ('surface + aux (no hinge)', MarkerStyle(hinge_springs=False))):
-        build_seconds, array = best_of(repeat, lambda: markers(style))
+        build_seconds, array = best_of(repeat, lambda: sheet_markers(*arguments(style)))
         serialize_seconds, data = best_of(repeat, lambda: serialize_message(array))
         points = sum(len(marker.points) for marker in array.markers)
-        rows.append((label, build_seconds, serialize_seconds, points, len(data)))
+        rows.append((f'objects, {label}', build_seconds, serialize_seconds, points,
+                     len(data)))
+        cdr_seconds, data = best_of(repeat, lambda: sheet_markers_cdr(*arguments(style)))
+        rows.append((f'numpy CDR, {label}', cdr_seconds, 0.0, points, len(data)))
 
     print(f'\n== grid {grid}x{grid}: {sheet.vertex_count} vertices, {len(sheet.triangles)} '
           f'triangles, {sheet.spring_count} springs (best of {repeat}) ==')
@@ -129,9 +133,9 @@ def bench_grid(grid: int, repeat: int) -> None:
     print(f'  => point cloud per published frame     {1e3 * cloud_total:8.2f} ms')
     for label, build_seconds, serialize_seconds, points, size in rows:
         total = normals_seconds + colors_seconds + build_seconds + serialize_seconds
-        print(f'  MarkerArray {label:26s} build {1e3 * build_seconds:7.2f} ms, serialise '
+        print(f'  MarkerArray {label:37s} build {1e3 * build_seconds:7.2f} ms, serialise '
               f'{1e3 * serialize_seconds:7.2f} ms ({points} points, {size / 1e6:.2f} MB)')
-        print(f'  => markers per published frame         {1e3 * total:8.2f} ms  ({label})')
+        print(f'  => markers per published frame {1e3 * total:8.2f} ms (with normals and colours)')
     print('  Point list for Marker.points, one per vertex: build / serialise')
     for name, (build_seconds, serialize_seconds) in point_list_variants(
             sheet.positions, repeat).items():

@@ -11,11 +11,13 @@ Namespaces and ids are stable, so RViz replaces markers in place frame after fra
 
 A spring kind with no springs is sent as DELETE: RViz warns about an empty LINE_LIST.
 
-Cost (measured by bench/bench_adapters.py): every point of a marker is one Python
-``geometry_msgs/Point`` and every colour one ``std_msgs/ColorRGBA`` (slow). We build one
-``Point`` and one ``ColorRGBA`` per *vertex* and let the triangle and line lists refer to
-the same objects by index, which costs a list index per entry instead of an object. The
-serialisation inside ``publish`` still reads every entry (about 0.8 µs each).
+Two outputs of the same markers (``sheet_marker_parts`` describes them once):
+- ``sheet_markers``: the MarkerArray message object. Every point is one Python
+  ``geometry_msgs/Point`` and every colour one ``std_msgs/ColorRGBA``; we build one of each per
+  *vertex* and let the triangle and line lists share them, but ``publish`` still serialises
+  every entry (about 1 µs each): slow (bench/bench_adapters.py).
+- ``sheet_markers_cdr``: the same message as serialised bytes, the large arrays written by
+  numpy (``marker_cdr``); ``Publisher.publish`` takes bytes. What the node publishes.
 """
 from __future__ import annotations
 
@@ -28,6 +30,8 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from paper_sim_ros.core.sheet import AUX, BEND, HINGE
+
+from .marker_cdr import CdrWriter, serialize_marker_array
 
 SURFACE_NS = 'paper/surface'
 SPRING_NS = {HINGE: 'paper/springs/hinge', AUX: 'paper/springs/aux', BEND: 'paper/springs/bend'}
@@ -87,8 +91,9 @@ def points_from_array(positions: np.ndarray) -> list[Point]:
     return [Point(x=x, y=y, z=z) for x, y, z in positions.tolist()]
 
 
-def colors_from_array(colors: np.ndarray, alpha: float = 1.0) -> list[ColorRGBA]:
-    """One ``ColorRGBA`` per row of a (N, 3) uint8 array (0-255) or float array (0-1)."""
+def color_array(colors: np.ndarray, alpha: float = 1.0) -> np.ndarray:
+    """(N, 4) float32 RGBA in [0, 1] of a (N, 3) uint8 array (0-255) or float array (0-1).
+    float32, like ColorRGBA's fields, so that a message survives serialisation unchanged."""
     colors = np.asarray(colors)
     if colors.ndim != 2 or colors.shape[1] != 3:
         raise ValueError(f'colors must be (N, 3), got {colors.shape}')
@@ -96,9 +101,15 @@ def colors_from_array(colors: np.ndarray, alpha: float = 1.0) -> list[ColorRGBA]
         unit = colors.astype(np.float64) / 255.0
     else:
         unit = np.clip(np.nan_to_num(colors.astype(np.float64), nan=0.0), 0.0, 1.0)
-    # ColorRGBA holds float32: round here so that a message survives serialisation unchanged
-    alpha = float(np.float32(alpha))
-    return [ColorRGBA(r=r, g=g, b=b, a=alpha) for r, g, b in unit.astype(np.float32).tolist()]
+    rows = np.empty((colors.shape[0], 4), dtype=np.float32)
+    rows[:, :3] = unit
+    rows[:, 3] = alpha
+    return rows
+
+
+def colors_from_array(colors: np.ndarray, alpha: float = 1.0) -> list[ColorRGBA]:
+    """One ``ColorRGBA`` per row of a (N, 3) uint8 array (0-255) or float array (0-1)."""
+    return [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in color_array(colors, alpha).tolist()]
 
 
 def rgba(color: tuple) -> ColorRGBA:
@@ -124,41 +135,46 @@ def delete_all_marker(header: Header) -> Marker:
                   scale=Vector3(x=1.0, y=1.0, z=1.0))
 
 
-def surface_marker(header: Header, vertex_points: list[Point], triangles: np.ndarray,
-                   vertex_colors: list[ColorRGBA]) -> Marker:
-    """TRIANGLE_LIST with three points (and three colours) per triangle, shared objects."""
+@dataclass
+class MarkerPart:
+    """A marker whose points (and colours) are still vertex indices: ``points`` of the
+    message are ``positions[indices]``; with ``per_point_colors`` its colours are the vertex
+    colours at the same indices. Both outputs, objects and CDR bytes, are made from these."""
+
+    marker: Marker
+    indices: np.ndarray | None = None
+    per_point_colors: bool = False
+
+
+def _check_indices(name: str, indices: np.ndarray, columns: int, vertex_count: int) -> None:
+    if indices.ndim != 2 or indices.shape[1] != columns:
+        raise ValueError(f'{name} must be (N, {columns}), got {indices.shape}')
+    if indices.size and (indices.min() < 0 or indices.max() >= vertex_count):
+        raise ValueError(f'{name}: vertex index out of range')
+
+
+def surface_part(header: Header, triangles: np.ndarray, vertex_count: int) -> MarkerPart:
+    """TRIANGLE_LIST with three points (and three colours) per triangle."""
     triangles = np.asarray(triangles)
-    if triangles.ndim != 2 or triangles.shape[1] != 3:
-        raise ValueError(f'triangles must be (T, 3), got {triangles.shape}')
-    if len(vertex_colors) != len(vertex_points):
-        raise ValueError('one colour per vertex is required')
-    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(vertex_points)):
-        raise ValueError('triangle index out of range')
-    order = triangles.ravel().tolist()
+    _check_indices('triangles', triangles, 3, vertex_count)
     marker = _base_marker(header, SURFACE_NS, 0, Marker.TRIANGLE_LIST)
     marker.scale = Vector3(x=1.0, y=1.0, z=1.0)
     marker.color = rgba((1.0, 1.0, 1.0, 1.0))
-    marker.points = [vertex_points[i] for i in order]
-    marker.colors = [vertex_colors[i] for i in order]
-    return marker
+    return MarkerPart(marker, triangles.ravel(), per_point_colors=True)
 
 
-def spring_marker(header: Header, vertex_points: list[Point], spring_vertices: np.ndarray,
-                  kind: int, width: float, color: tuple) -> Marker:
+def spring_part(header: Header, spring_vertices: np.ndarray, vertex_count: int, kind: int,
+                width: float, color: tuple) -> MarkerPart:
     """LINE_LIST of the given springs (two points per spring), or DELETE when there are none."""
     spring_vertices = np.asarray(spring_vertices)
     ns = SPRING_NS[kind]
     if spring_vertices.shape[0] == 0:
-        return delete_marker(header, ns, 0)
-    if spring_vertices.ndim != 2 or spring_vertices.shape[1] != 2:
-        raise ValueError(f'spring_vertices must be (S, 2), got {spring_vertices.shape}')
-    if spring_vertices.min() < 0 or spring_vertices.max() >= len(vertex_points):
-        raise ValueError('spring vertex index out of range')
+        return MarkerPart(delete_marker(header, ns, 0))
+    _check_indices('spring_vertices', spring_vertices, 2, vertex_count)
     marker = _base_marker(header, ns, 0, Marker.LINE_LIST)
     marker.scale = Vector3(x=float(width), y=0.0, z=0.0)
     marker.color = rgba(color)
-    marker.points = [vertex_points[i] for i in spring_vertices.ravel().tolist()]
-    return marker
+    return MarkerPart(marker, spring_vertices.ravel())
 
 
 def probe_markers(header: Header, centers: np.ndarray, radii: np.ndarray, active: np.ndarray,
@@ -185,28 +201,75 @@ def probe_markers(header: Header, centers: np.ndarray, radii: np.ndarray, active
     return markers
 
 
+def sheet_marker_parts(header: Header, positions: np.ndarray, triangles: np.ndarray,
+                       vertex_colors: np.ndarray, spring_vertices: np.ndarray,
+                       spring_kind: np.ndarray, probe_centers: np.ndarray,
+                       probe_radii: np.ndarray, probe_active: np.ndarray,
+                       style: MarkerStyle = MarkerStyle(),
+                       delete_all: bool = False) -> list[MarkerPart]:
+    """Everything of ``sheet_markers`` but the point lists; validates all input."""
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 2 or positions.shape[1] != 3:
+        raise ValueError(f'positions must be (V, 3), got {positions.shape}')
+    _checked_finite('positions', positions)
+    vertex_count = positions.shape[0]
+    if len(vertex_colors) != vertex_count:
+        raise ValueError(f'{len(vertex_colors)} colours for {vertex_count} vertices')
+    spring_kind = np.asarray(spring_kind)
+    spring_vertices = np.asarray(spring_vertices)
+    parts = [MarkerPart(delete_all_marker(header))] if delete_all else []
+    parts.append(surface_part(header, triangles, vertex_count))
+    for kind in (HINGE, AUX, BEND):
+        shown, width, color = style.spring_settings(kind)
+        if shown:
+            parts.append(spring_part(header, spring_vertices[spring_kind == kind],
+                                     vertex_count, kind, width, color))
+        else:
+            parts.append(MarkerPart(delete_marker(header, SPRING_NS[kind], 0)))
+    parts.extend(MarkerPart(marker) for marker in probe_markers(
+        header, probe_centers, probe_radii, probe_active, style.probe_color))
+    return parts
+
+
 def sheet_markers(header: Header, positions: np.ndarray, triangles: np.ndarray,
                   vertex_colors: np.ndarray, spring_vertices: np.ndarray,
                   spring_kind: np.ndarray, probe_centers: np.ndarray, probe_radii: np.ndarray,
                   probe_active: np.ndarray, style: MarkerStyle = MarkerStyle(),
                   delete_all: bool = False) -> MarkerArray:
-    """The whole sheet as one MarkerArray; ``delete_all`` puts a DELETEALL first (reset)."""
-    positions = np.asarray(positions)
-    spring_kind = np.asarray(spring_kind)
+    """The whole sheet as one MarkerArray message; ``delete_all`` puts a DELETEALL first
+    (after a reset). One ``Point`` and one ``ColorRGBA`` object per vertex, shared by every
+    marker that refers to the vertex (slow: see ``sheet_markers_cdr``)."""
+    parts = sheet_marker_parts(header, positions, triangles, vertex_colors, spring_vertices,
+                               spring_kind, probe_centers, probe_radii, probe_active, style,
+                               delete_all)
     vertex_points = points_from_array(positions)
-    if len(vertex_colors) != len(vertex_points):
-        raise ValueError(f'{len(vertex_colors)} colours for {len(vertex_points)} vertices')
-    markers = [delete_all_marker(header)] if delete_all else []
-    markers.append(surface_marker(header, vertex_points, triangles,
-                                  colors_from_array(vertex_colors)))
-    for kind in (HINGE, AUX, BEND):
-        shown, width, color = style.spring_settings(kind)
-        if shown:
-            markers.append(spring_marker(header, vertex_points,
-                                         np.asarray(spring_vertices)[spring_kind == kind],
-                                         kind, width, color))
-        else:
-            markers.append(delete_marker(header, SPRING_NS[kind], 0))
-    markers.extend(probe_markers(header, probe_centers, probe_radii, probe_active,
-                                 style.probe_color))
-    return MarkerArray(markers=markers)
+    vertex_color_list = colors_from_array(vertex_colors)
+    for part in parts:
+        if part.indices is None:
+            continue
+        order = part.indices.tolist()
+        part.marker.points = [vertex_points[i] for i in order]
+        if part.per_point_colors:
+            part.marker.colors = [vertex_color_list[i] for i in order]
+    return MarkerArray(markers=[part.marker for part in parts])
+
+
+def sheet_markers_cdr(header: Header, positions: np.ndarray, triangles: np.ndarray,
+                      vertex_colors: np.ndarray, spring_vertices: np.ndarray,
+                      spring_kind: np.ndarray, probe_centers: np.ndarray,
+                      probe_radii: np.ndarray, probe_active: np.ndarray,
+                      style: MarkerStyle = MarkerStyle(), delete_all: bool = False,
+                      writer: CdrWriter | None = None) -> bytes:
+    """``sheet_markers`` serialised (the bytes of ``serialize_message(sheet_markers(...))``
+    but for padding, for ``Publisher.publish``), built from numpy without a Python object per
+    point. ``writer``: a ``CdrWriter`` to write into (it records where the padding is)."""
+    parts = sheet_marker_parts(header, positions, triangles, vertex_colors, spring_vertices,
+                               spring_kind, probe_centers, probe_radii, probe_active, style,
+                               delete_all)
+    positions = np.asarray(positions, dtype=np.float64)
+    rgba_rows = color_array(vertex_colors)
+    return serialize_marker_array([
+        (part.marker,
+         positions[part.indices] if part.indices is not None else None,
+         rgba_rows[part.indices] if part.per_point_colors else None)
+        for part in parts], writer)

@@ -45,7 +45,7 @@ from .core.sheet import AUX, BEND, HINGE, Sheet
 from .core.simulator import Simulator
 from .core.topology import vertex_normals
 from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
-from .msg_adapters.markers import MarkerStyle, sheet_markers
+from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
 from .msg_adapters.surface import damage_labels, lambert_colors
 from .node_runner import run_node
@@ -436,7 +436,8 @@ class PaperSimNode(Node):
             style = MarkerStyle(hinge_springs=settings.hinge_springs,
                                 aux_springs=settings.aux_springs,
                                 bend_springs=settings.bend_springs)
-            self._markers_pub.publish(sheet_markers(
+            # serialised by numpy: the same bytes as the MarkerArray object, 30x cheaper
+            self._markers_pub.publish(sheet_markers_cdr(
                 header, sheet.positions, sheet.triangles, colors, sheet.spring_vertices,
                 sheet.spring_kind, centers, radii, active, style,
                 delete_all=self._delete_all_pending))

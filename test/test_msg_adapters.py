@@ -7,16 +7,17 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 
 from paper_sim_ros.core.config import SheetConfig
 from paper_sim_ros.core.sheet import AUX, BEND, HINGE, build_flat_sheet
 from paper_sim_ros.core.topology import vertex_normals
 from paper_sim_ros.msg_adapters.diagnostics import (diagnostic_array, diagnostic_status,
                                                     format_value, values_of)
+from paper_sim_ros.msg_adapters.marker_cdr import CdrWriter, serialize_marker_array
 from paper_sim_ros.msg_adapters.markers import (PROBE_NS, SPRING_NS, SURFACE_NS, MarkerStyle,
                                                 colors_from_array, points_from_array,
-                                                sheet_markers)
+                                                sheet_markers, sheet_markers_cdr)
 from paper_sim_ros.msg_adapters.point_cloud import (POINT_DTYPE, POINT_FIELDS, create_cloud,
                                                     dense_surface_points, read_points,
                                                     sheet_points)
@@ -171,13 +172,17 @@ def test_lambert_colors_are_finite_and_brightest_facing_the_light():
 
 
 # --------------------------------------------------------------------------------- markers
-def markers_of(sheet, style=MarkerStyle(), delete_all=False, probes=None):
+def marker_arguments(sheet, style=MarkerStyle(), delete_all=False, probes=None,
+                     header=HEADER):
     normals = vertex_normals(sheet.positions, sheet.triangles)
     centers, radii, active = probes or (np.array([[0.0, 0.0, 0.05], [1.0, 1.0, 1.0]]),
                                         np.array([0.02, 0.03]), np.array([True, False]))
-    return sheet_markers(HEADER, sheet.positions, sheet.triangles, lambert_colors(normals),
-                         sheet.spring_vertices, sheet.spring_kind, centers, radii, active,
-                         style, delete_all)
+    return (header, sheet.positions, sheet.triangles, lambert_colors(normals),
+            sheet.spring_vertices, sheet.spring_kind, centers, radii, active, style, delete_all)
+
+
+def markers_of(sheet, style=MarkerStyle(), delete_all=False, probes=None):
+    return sheet_markers(*marker_arguments(sheet, style, delete_all, probes))
 
 
 def by_ns(array: MarkerArray) -> dict:
@@ -259,6 +264,68 @@ def test_delete_all_comes_first_after_reset():
 def test_marker_array_round_trip_through_serialisation():
     array = markers_of(bumped_sheet(), delete_all=True)
     assert deserialize_message(serialize_message(array), MarkerArray) == array
+
+
+def assert_same_but_padding(ours: bytes, padding: list, reference: bytes) -> None:
+    """rmw_fastrtps leaves CDR padding bytes uninitialised: compare all the others."""
+    assert len(ours) == len(reference), f'{len(ours)} bytes, rclpy writes {len(reference)}'
+    mask = np.ones(len(ours), dtype=bool)
+    for start, end in padding:
+        assert ours[start:end] == bytes(end - start), 'our padding is not zero'
+        mask[start:end] = False
+    mine = np.frombuffer(ours, np.uint8)[mask]
+    theirs = np.frombuffer(reference, np.uint8)[mask]
+    differ = np.flatnonzero(mine != theirs)
+    assert differ.size == 0, \
+        f'{differ.size} bytes differ, first at {np.flatnonzero(mask)[differ[0]]}'
+
+
+@pytest.mark.parametrize('grid, style, delete_all, probes', [
+    (3, MarkerStyle(), False, None),
+    (5, MarkerStyle(bend_springs=True, hinge_springs=False), True, None),
+    (9, MarkerStyle(aux_springs=False), False, (np.zeros((0, 3)), np.zeros(0),
+                                                np.zeros(0, bool))),
+    (17, MarkerStyle(), True, (np.ones((3, 3)), np.full(3, 0.01), np.array([0, 1, 1], bool))),
+])
+def test_cdr_markers_are_the_bytes_rclpy_serialises(grid, style, delete_all, probes):
+    sheet = bumped_sheet(grid, grid + 1)
+    sheet.spring_kind[[0, 7]] = AUX
+    header = Header(frame_id='paper_frame_with_odd_length')
+    header.stamp.sec, header.stamp.nanosec = 1234, 567
+    arguments = marker_arguments(sheet, style, delete_all, probes, header)
+    writer = CdrWriter()
+    ours = sheet_markers_cdr(*arguments, writer=writer)
+    message = sheet_markers(*arguments)
+    assert_same_but_padding(ours, writer.padding, serialize_message(message))
+    assert deserialize_message(ours, MarkerArray) == message
+
+
+def test_cdr_writer_handles_every_marker_field():
+    marker = Marker(ns='ns\u00e9', id=-3, type=Marker.TEXT_VIEW_FACING, text='hello',
+                    texture_resource='embedded://tex', mesh_resource='package://m.dae',
+                    mesh_use_embedded_materials=True, frame_locked=True)
+    marker.texture.format = 'png'
+    marker.texture.data = [1, 2, 3]
+    marker.mesh_file.filename = 'm.dae'
+    marker.mesh_file.data = [9] * 5
+    marker.lifetime.sec, marker.lifetime.nanosec = 2, 5
+    marker.uv_coordinates = [UVCoordinate(u=0.25, v=0.5)]
+    marker.points = points_from_array(np.array([[1.0, 2.0, 3.0]]))
+    marker.colors = colors_from_array(np.array([[10, 20, 30]], np.uint8))
+    writer = CdrWriter()
+    ours = serialize_marker_array([(marker, None, None), (Marker(), None, None)], writer)
+    message = MarkerArray(markers=[marker, Marker()])
+    assert_same_but_padding(ours, writer.padding, serialize_message(message))
+    assert deserialize_message(ours, MarkerArray) == message
+
+
+@pytest.mark.parametrize('bad', [np.nan, np.inf])
+def test_cdr_markers_refuse_non_finite_positions(bad):
+    sheet = bumped_sheet()
+    arguments = marker_arguments(sheet)
+    sheet.positions[0, 0] = bad
+    with pytest.raises(ValueError, match='finite'):
+        sheet_markers_cdr(*arguments)
 
 
 @pytest.mark.parametrize('bad', [np.nan, np.inf])
