@@ -9,6 +9,7 @@
                        outline after side-length restoration
 - shading_levels.png   texture only, full-detail, level-2 and level-4 normals (Fig. 10)
 - level_seams.png      level-4 normals: the paper's bilinear patches vs the spline used
+- aged_settling.png    the aged sheet dropped on a table under the Simulator (defaults)
 - printed_page.png     an image file mapped on an aged sheet (Fig. 11); its source image
                        is written as printed_page_source.png
 
@@ -28,11 +29,12 @@ from PIL import Image, ImageDraw, ImageFont
 
 from paper_sim_ros.core.appearance import (
     AppearanceConfig, PaperAppearance, local_frames, sample_texture)
-from paper_sim_ros.core.config import SheetConfig
+from paper_sim_ros.core.config import ContactConfig, SheetConfig, SimulationConfig
 from paper_sim_ros.core.fractal import (
     aged_surface, bilinear_upsample, build_aged_sheet, fractal_height_levels, fractal_heights,
     grid_exponent, lowpass_filter, outline_area, restore_side_lengths)
 from paper_sim_ros.core.sheet import grid_triangles
+from paper_sim_ros.core.simulator import Simulator
 
 SUPERSAMPLE = 3
 BACKGROUND = np.array([0.80, 0.82, 0.85])
@@ -284,6 +286,28 @@ def level_seams_picture(out: Path) -> None:
     Image.fromarray(tile(panels, 2)).save(out / 'level_seams.png', optimize=True)
 
 
+def settling_picture(out: Path) -> None:
+    """The aged sheet dropped on a table under the Simulator (SolverConfig defaults), at
+    a few moments: what the core does with the waviness today."""
+    sheet_config = SheetConfig()
+    sheet = build_aged_sheet(sheet_config, 0.01, None, seed=2)
+    simulator = Simulator(SimulationConfig(sheet=sheet_config,
+                                           contact=ContactConfig(ground_enabled=True)), sheet)
+    appearance = PaperAppearance(AppearanceConfig(light_direction=FIGURE_LIGHT), sheet)
+    rotation = view_rotation(-25, 12)
+    panels = []
+    for frame in (0, 3, 6, 60):
+        while simulator.frame < frame:
+            simulator.step_frame()
+        current = simulator.sheet
+        heights = current.positions[:, 2]
+        image = textured_render(appearance, current, appearance.vertex_light(current),
+                                (420, 200), rotation, 0.16)
+        panels.append(label(image, f't = {simulator.time:.2f} s, heights '
+                                   f'{np.ptp(heights) * 1e3:.1f} mm'))
+    Image.fromarray(tile(panels, 2)).save(out / 'aged_settling.png', optimize=True)
+
+
 def page_image(path: Path) -> None:
     """A printed page to map on the sheet: title, text lines and a radial figure."""
     width, height = 840, 1188
@@ -378,6 +402,7 @@ def main() -> None:
     fractal_pipeline_picture(args.out)
     shading_levels_picture(args.out)
     level_seams_picture(args.out)
+    settling_picture(args.out)
     printed_page_picture(args.out)
     print(f'wrote pictures to {args.out}')
 

@@ -7,14 +7,18 @@ of the surface.
 
 How the intermediate-level normals follow a deforming, even a damaged, sheet: at
 construction the rest shape (the sheet given, on a ``(2^N + 1)²`` grid) is resampled on
-the lattice of fractal level L (every ``2^(N−L+1)``-th vertex), interpolated bilinearly
-back to the full grid and low-pass filtered: the surface at the resolution of "L
-iterations" (the random draws themselves are not known from a ``Sheet``; this is the same
-resolution, taken from the shape). Each vertex stores the level-L normal in its own local
-frame (the material x direction, the normal, and their cross product) of the full-detail
-rest shape, on a grid over the material. Every frame, that stored tilt is applied to the
+the lattice of fractal level L (every ``2^(N−L+1)``-th vertex), interpolated back to the
+full grid (C¹ spline, see ``level_surface``) and low-pass filtered: the surface at the
+resolution of "L iterations" (the random draws themselves are not known from a ``Sheet``;
+this is the same resolution, taken from the shape). Each vertex stores the level-L
+normal in its own local frame (the material x direction, the normal, and their cross
+product) of the full-detail rest shape, on a grid over the material. Every frame, that stored tilt is applied to the
 current local frame, looked up bilinearly at each vertex's material coordinates, so it
 rotates with the sheet, follows folds, and covers vertices that damage inserts.
+The tilt removes the fine relief of the rest shape from the light; where the sheet has
+lost that relief (pressed flat), removing it again would paint the relief in reverse, so
+the tilt is scaled by how much of the relief is still there (``detail_presence``: 1 at
+rest and under rigid motion, 0 when flat).
 On sheets that are not such a grid (or with ``normal_level`` above N), the current
 full-detail normals shade.
 
@@ -32,12 +36,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import os
 
 import numpy as np
 from numba import njit
 
 from .fractal import grid_exponent, lowpass_filter
 from .sheet import Sheet, grid_triangles
+
+MAX_TEXTURE_SIDE = 4096
+"""Image files with a longer side are scaled down to it when loaded (memory, and the
+texture is sent to Rerun)."""
 
 FULL_DETAIL_LEVEL = 16
 """A ``normal_level`` at least this high always shades with the full-detail normals."""
@@ -72,24 +81,27 @@ class AppearanceConfig:
     def __post_init__(self) -> None:
         _require(isinstance(self.texture_path, str),
                  f'texture_path must be a string, got {self.texture_path!r}')
-        _require(isinstance(self.normal_level, int) and 1 <= self.normal_level
-                 <= FULL_DETAIL_LEVEL,
+        _require(isinstance(self.normal_level, int) and not isinstance(self.normal_level, bool)
+                 and 1 <= self.normal_level <= FULL_DETAIL_LEVEL,
                  f'normal_level must be an integer in [1, {FULL_DETAIL_LEVEL}], '
                  f'got {self.normal_level!r}')
-        light = tuple(self.light_direction)
-        _require(len(light) == 3 and all(isinstance(c, (int, float)) and math.isfinite(c)
-                                         for c in light)
+        try:
+            light = tuple(float(c) for c in self.light_direction)
+        except (TypeError, ValueError):
+            light = ()
+        _require(len(light) == 3 and all(math.isfinite(c) for c in light)
                  and math.hypot(*light) > 1e-9,
                  f'light_direction must be three finite numbers, not all zero, '
                  f'got {self.light_direction!r}')
+        object.__setattr__(self, 'light_direction', light)
         for name in ('ambient', 'texture_blend'):
             value = getattr(self, name)
             _require(isinstance(value, (int, float)) and math.isfinite(value)
                      and 0.0 <= value <= 1.0, f'{name} must be in [0, 1], got {value!r}')
         _require(isinstance(self.texture_seed, int) and 0 <= self.texture_seed < 2**63,
                  f'texture_seed must be a non-negative integer, got {self.texture_seed!r}')
-        _require(isinstance(self.texture_size, int) and 16 <= self.texture_size <= 4096,
-                 f'texture_size must be an integer in [16, 4096], got {self.texture_size!r}')
+        _require(isinstance(self.texture_size, int) and 16 <= self.texture_size <= 2048,
+                 f'texture_size must be an integer in [16, 2048], got {self.texture_size!r}')
 
 
 # ------------------------------------------------------------------------------ textures
@@ -119,7 +131,7 @@ def _fibres(rng: np.random.Generator, rows: int, columns: int) -> np.ndarray:
     step = (length / samples)[:, None]
     x = np.cumsum(step * np.cos(angle), axis=1) + rng.uniform(0, columns, count)[:, None]
     y = np.cumsum(step * np.sin(angle), axis=1) + rng.uniform(0, rows, count)[:, None]
-    weight = np.repeat(rng.uniform(0.2, 1.0, count) / max(samples * 1.0 / 32, 1.0), samples)
+    weight = np.repeat(rng.uniform(0.2, 1.0, count), samples)
     index = (np.mod(np.rint(y).astype(np.int64), rows) * columns
              + np.mod(np.rint(x).astype(np.int64), columns)).ravel()
     density = np.bincount(index, weights=weight, minlength=rows * columns)
@@ -142,16 +154,26 @@ def procedural_paper_texture(rows: int, columns: int, seed: int) -> np.ndarray:
 
 
 def load_texture_image(path: str) -> np.ndarray:
-    """An image file as (H, W, 3) uint8. A missing file raises ``FileNotFoundError``, an
-    unreadable one ``OSError``, each naming the path."""
+    """An image file as (H, W, 3) uint8: transparent parts on white paper, images with a
+    side longer than ``MAX_TEXTURE_SIDE`` scaled down to it. A missing file raises
+    ``FileNotFoundError``, an unreadable one ``OSError``, each naming the path."""
     from PIL import Image, UnidentifiedImageError
 
+    path = os.path.expanduser(path)
     try:
         with Image.open(path) as image:
+            image.load()
+            if max(image.size) > MAX_TEXTURE_SIDE:
+                image.thumbnail((MAX_TEXTURE_SIDE, MAX_TEXTURE_SIDE), Image.LANCZOS)
+            if 'A' in image.getbands() or 'transparency' in image.info:
+                rgba = image.convert('RGBA')
+                white = Image.new('RGBA', rgba.size, (255, 255, 255, 255))
+                image = Image.alpha_composite(white, rgba)
             pixels = np.asarray(image.convert('RGB'), dtype=np.uint8)
     except FileNotFoundError as error:
         raise FileNotFoundError(f'texture image {path!r} does not exist') from error
-    except (UnidentifiedImageError, OSError, ValueError) as error:
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError,
+            ValueError) as error:
         raise OSError(f'texture image {path!r} cannot be read as an image: {error}') from error
     if pixels.ndim != 3 or pixels.shape[0] < 1 or pixels.shape[1] < 1:
         raise OSError(f'texture image {path!r} has no pixels')
@@ -236,16 +258,19 @@ def _bilinear_kernel(grid: np.ndarray, x: np.ndarray, y: np.ndarray, out: np.nda
 
 
 @njit(cache=True)
-def _apply_tilt_kernel(tilt_grid: np.ndarray, x: np.ndarray, y: np.ndarray,
+def _apply_tilt_kernel(tilt_grid: np.ndarray, x: np.ndarray, y: np.ndarray, presence: float,
                        tangent: np.ndarray, bitangent: np.ndarray, normal: np.ndarray,
                        out: np.ndarray) -> None:
-    """out[v] = the tilt looked up bilinearly at grid column x[v], row y[v], expressed in the
-    frame (tangent, bitangent, normal) of vertex v, normalised (the plain normal where the
-    result is degenerate)."""
-    tilt = np.empty((1, 3))
+    """out[v] = the tilt (channels 0–2 of the grid) looked up bilinearly at grid column x[v],
+    row y[v], its tangential part scaled by ``presence``, expressed in the frame (tangent,
+    bitangent, normal) of vertex v and normalised (the plain normal where degenerate)."""
+    tilt = np.empty((1, tilt_grid.shape[2]))
     for v in range(x.shape[0]):
         _bilinear_kernel(tilt_grid, x[v:v + 1], y[v:v + 1], tilt)
-        a, b, c = tilt[0, 0], tilt[0, 1], tilt[0, 2]
+        a, b = presence * tilt[0, 0], presence * tilt[0, 1]
+        c = math.sqrt(max(0.0, 1.0 - a * a - b * b))
+        if tilt[0, 2] < 0.0:
+            c = -c
         ox = a * tangent[v, 0] + b * bitangent[v, 0] + c * normal[v, 0]
         oy = a * tangent[v, 1] + b * bitangent[v, 1] + c * normal[v, 1]
         oz = a * tangent[v, 2] + b * bitangent[v, 2] + c * normal[v, 2]
@@ -256,26 +281,58 @@ def _apply_tilt_kernel(tilt_grid: np.ndarray, x: np.ndarray, y: np.ndarray,
             out[v, 0], out[v, 1], out[v, 2] = normal[v, 0], normal[v, 1], normal[v, 2]
 
 
+@njit(cache=True)
+def _detail_kernel(positions: np.ndarray, triangles: np.ndarray, normal: np.ndarray,
+                   total: np.ndarray, count: np.ndarray, out: np.ndarray) -> None:
+    """out[v] = (x_v − mean of its triangle neighbours)·n_v (``total``, ``count`` zeroed
+    scratch): the finest-scale relief along the normal (umbrella operator)."""
+    for t in range(triangles.shape[0]):
+        for corner in range(3):
+            v = triangles[t, corner]
+            for other in (triangles[t, (corner + 1) % 3], triangles[t, (corner + 2) % 3]):
+                total[v, 0] += positions[other, 0]
+                total[v, 1] += positions[other, 1]
+                total[v, 2] += positions[other, 2]
+                count[v] += 1.0
+    for v in range(positions.shape[0]):
+        value = 0.0
+        if count[v] > 0.0:
+            for k in range(3):
+                value += (positions[v, k] - total[v, k] / count[v]) * normal[v, k]
+        out[v] = value if abs(value) < math.inf else 0.0  # NaN and ±inf: no relief
+
+
+def normal_detail(positions: np.ndarray, triangles: np.ndarray,
+                  normal: np.ndarray) -> np.ndarray:
+    """(V,) [m]: each vertex's offset along its normal from the mean of its neighbours —
+    the finest relief of the surface (0 on a plane; a smooth bend adds only κ·cell²)."""
+    vertex_count = positions.shape[0]
+    out = np.empty(vertex_count)
+    _detail_kernel(np.ascontiguousarray(positions, dtype=np.float64),
+                   np.ascontiguousarray(triangles, dtype=np.int64),
+                   np.ascontiguousarray(normal, dtype=np.float64),
+                   np.zeros((vertex_count, 3)), np.zeros(vertex_count), out)
+    return out
+
+
 def bilinear_sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """(V, K) float64 samples of a (rows, columns, K) grid at fractional column ``x`` and
-    row ``y`` (clamped to the grid)."""
-    grid = np.ascontiguousarray(grid, dtype=np.float64) if grid.dtype != np.float32 \
-        else np.ascontiguousarray(grid)
+    """(V, K) float64 samples of a (rows, columns, K) grid (uint8, float32 or float64) at
+    fractional column ``x`` and row ``y`` (clamped to the grid)."""
+    if grid.dtype not in (np.uint8, np.float32, np.float64):
+        grid = grid.astype(np.float64)
     out = np.empty((x.shape[0], grid.shape[2]))
-    _bilinear_kernel(grid, np.ascontiguousarray(x, dtype=np.float64),
+    _bilinear_kernel(np.ascontiguousarray(grid), np.ascontiguousarray(x, dtype=np.float64),
                      np.ascontiguousarray(y, dtype=np.float64), out)
     return out
 
 
 def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Bilinear samples (V, 3) in [0, 1] of ``image`` at texture coordinates ``uv``
-    (u along columns, v along rows from the top; clamped to [0, 1]). ``image`` is uint8,
-    or float32 in [0, 1] (cheaper: no conversion per call)."""
+    """Bilinear samples (V, 3) in [0, 1] of a uint8 ``image`` at texture coordinates ``uv``
+    (u along columns, v along rows from the top; clamped to [0, 1])."""
     rows, columns = image.shape[:2]
-    if image.dtype == np.uint8:
-        image = image.astype(np.float32) / np.float32(255.0)
     uv = np.asarray(uv, dtype=np.float64)
-    return bilinear_sample(image, uv[:, 0] * (columns - 1), uv[:, 1] * (rows - 1))
+    samples = bilinear_sample(image, uv[:, 0] * (columns - 1), uv[:, 1] * (rows - 1))
+    return samples * (1.0 / 255.0)
 
 
 def local_frames(positions: np.ndarray, material: np.ndarray,
@@ -364,13 +421,14 @@ class PaperAppearance:
             columns = max(16, int(round(longer / ratio))) if ratio >= 1 else longer
             self._texture = procedural_paper_texture(rows, columns, config.texture_seed)
         self._texture.setflags(write=False)
-        self._texture_float = self._texture.astype(np.float32) / np.float32(255.0)
         light = np.asarray(config.light_direction, dtype=np.float64)
         self._light = light / np.linalg.norm(light)
         self._flat_light = config.ambient + (1.0 - config.ambient) * abs(self._light[2])
         self._width = sheet.width
         self._height = sheet.height
         self._tilt_grid = self._level_tilt(sheet)
+        self._rest_detail = None if self._tilt_grid is None \
+            else np.ascontiguousarray(self._tilt_grid[..., 3:])
 
     @property
     def texture_image(self) -> np.ndarray:
@@ -383,8 +441,9 @@ class PaperAppearance:
         return self._tilt_grid is not None
 
     def _level_tilt(self, sheet: Sheet) -> np.ndarray | None:
-        """(n, n, 3): the level-L normal in the full-detail rest frame of each grid vertex,
-        or None when the full-detail normals are to shade."""
+        """(n, n, 4): per grid vertex, the level-L normal in the full-detail rest frame
+        (3 channels) and the rest shape's fine relief ``normal_detail`` (1 channel); None
+        when the full-detail normals are to shade."""
         side = _grid_side(sheet)
         if side is None or self.config.normal_level > grid_exponent(side):
             return None
@@ -395,8 +454,9 @@ class PaperAppearance:
         tangent, bitangent, normal = local_frames(grid.reshape(-1, 3), sheet.material,
                                                   triangles)
         tilt = np.stack([np.sum(level_normal * frame, axis=1)
-                         for frame in (tangent, bitangent, normal)], axis=1)
-        return tilt.reshape(side, side, 3)
+                         for frame in (tangent, bitangent, normal)]
+                        + [normal_detail(grid.reshape(-1, 3), triangles, normal)], axis=1)
+        return tilt.reshape(side, side, 4)
 
     def _grid_coordinates(self, material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Fractional (column, row) of material coordinates on the stored tilt grid."""
@@ -404,16 +464,39 @@ class PaperAppearance:
         return ((material[:, 0] / self._width + 0.5) * cells,
                 (material[:, 1] / self._height + 0.5) * cells)
 
+    def detail_presence(self, sheet: Sheet, normal: np.ndarray | None = None) -> float:
+        """How much of the rest shape's fine relief the sheet still has, in [0, 1]: the
+        regression slope of its current ``normal_detail`` on the rest one, over the vertices
+        where the two differ by less than 4 rms of the rest relief (a crease, far larger,
+        does not count). 1 at rest and under any rigid motion, 0 once pressed flat."""
+        if self._tilt_grid is None:
+            return 0.0
+        if normal is None:
+            _, _, normal = local_frames(sheet.positions, sheet.material, sheet.triangles)
+        x, y = self._grid_coordinates(np.asarray(sheet.material, dtype=np.float64))
+        rest = bilinear_sample(self._rest_detail, x, y)[:, 0]
+        now = normal_detail(sheet.positions, sheet.triangles, normal)
+        spread = math.sqrt(float(np.mean(rest * rest)))
+        if not spread > 1e-12:
+            return 1.0
+        kept = np.abs(now - rest) <= 4.0 * spread
+        slope = float(np.sum(now[kept] * rest[kept])) / max(float(np.sum(rest[kept] ** 2)),
+                                                           1e-300)
+        return min(max(slope, 0.0), 1.0) if math.isfinite(slope) else 0.0
+
     def shading_normals(self, sheet: Sheet) -> np.ndarray:
         """(V, 3) unit normals that light the sheet: the intermediate-level normals carried
-        by the current geometry, or the full-detail normals. Never NaN."""
+        by the current geometry, to the extent the sheet still has the rest shape's fine
+        relief (``detail_presence``), or the full-detail normals. Never NaN."""
         tangent, bitangent, normal = local_frames(sheet.positions, sheet.material,
                                                   sheet.triangles)
         if self._tilt_grid is None:
             return normal
+        presence = self.detail_presence(sheet, normal)
         x, y = self._grid_coordinates(np.asarray(sheet.material, dtype=np.float64))
         shaded = np.empty_like(normal)
-        _apply_tilt_kernel(self._tilt_grid, x, y, tangent, bitangent, normal, shaded)
+        _apply_tilt_kernel(self._tilt_grid, x, y, presence, tangent, bitangent, normal,
+                           shaded)
         return shaded
 
     def vertex_light(self, sheet: Sheet) -> np.ndarray:
@@ -429,7 +512,7 @@ class PaperAppearance:
         """(V, 3) uint8 colours: the white surface lit (``vertex_light``), modulated by the
         texture at the vertices' texture coordinates. Works for any vertex count; never
         NaN."""
-        texture = sample_texture(self._texture_float, sheet.texture_coordinates())
+        texture = sample_texture(self._texture, sheet.texture_coordinates())
         blend = self.config.texture_blend
         colors = (255.0 * self.vertex_light(sheet))[:, None] * (blend * texture + (1.0 - blend))
         colors = np.nan_to_num(colors, nan=255.0 * self.config.ambient)
