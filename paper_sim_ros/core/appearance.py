@@ -12,9 +12,10 @@ full grid (C¹ spline, see ``level_surface``) and low-pass filtered: the surface
 resolution of "L iterations" (the random draws themselves are not known from a ``Sheet``;
 this is the same resolution, taken from the shape). Each vertex stores the level-L
 normal in its own local frame (the material x direction, the normal, and their cross
-product) of the full-detail rest shape, on a grid over the material. Every frame, that stored tilt is applied to the
-current local frame, looked up bilinearly at each vertex's material coordinates, so it
-rotates with the sheet, follows folds, and covers vertices that damage inserts.
+product) of the full-detail rest shape, on a grid over the material. Every frame, that
+stored tilt is applied to the current local frame, looked up bilinearly at each vertex's
+material coordinates, so it rotates with the sheet, follows folds, and covers vertices
+that damage inserts.
 The tilt removes the fine relief of the rest shape from the light; where the sheet has
 lost that relief (pressed flat), removing it again would paint the relief in reverse, so
 the tilt is scaled by how much of the relief is still there (``detail_presence``: 1 at
