@@ -74,20 +74,27 @@ class SolverConfig:
     """Time stepping (SPEC §2)."""
 
     method: str = 'constrained'
-    """'paper': Eq. 6 Jacobi, every spring a force; 'constrained': stretch as constraints
-    (Gauss–Seidel strain projection) plus the implicit Jacobi step for bending;
+    """'constrained' (default): HINGE and AUX springs held within a strain band (projective
+    local/global iterations, then Gauss–Seidel strain limiting), BEND springs implicit;
+    'paper': the paper's Eq. 6 Jacobi iteration, every spring a force;
     'explicit': symplectic Euler, kept to show why the paper needs an implicit method."""
     dt: float = 1.0 / 60.0
     """Frame step [s]."""
     substeps: int = 1
     """Integration sub-steps per frame."""
     jacobi_iterations: int = 10
-    """Jacobi iterations of Eq. 6 per sub-step."""
-    constraint_iterations: int = 6
-    """Symmetric Gauss–Seidel sweeps of the stretch projection per sub-step ('constrained')."""
-    max_stretch: float = 0.004
+    """Jacobi iterations of Eq. 6 per sub-step ('paper')."""
+    projective_iterations: int = 3
+    """Local/global iterations per sub-step ('constrained')."""
+    global_stiffness: float = 200.0
+    """Weight [N/m] of the held springs in the global step ('constrained'). It is a solver
+    weight, not the material's E·t: the strain band, not this, holds paper inextensible;
+    far larger weights lock the sheet's rotation in few iterations."""
+    constraint_iterations: int = 4
+    """Symmetric Gauss–Seidel strain-limiting sweeps per sub-step ('constrained')."""
+    max_stretch: float = 0.003
     """Stretch the projection aims for at most (l/l0 - 1)."""
-    max_compression: float = 0.004
+    max_compression: float = 0.003
     """Compression the projection aims for at most (1 - l/l0)."""
     air_damping: float = 0.2
     """Linear air drag rate [1/s], mass proportional."""
@@ -99,7 +106,7 @@ class SolverConfig:
         _finite_positive('dt', self.dt)
         _require(self.dt <= 0.1, f'dt must be <= 0.1 s, got {self.dt}')
         for name, upper in (('substeps', 10000), ('jacobi_iterations', 100000),
-                            ('constraint_iterations', 10000)):
+                            ('projective_iterations', 1000), ('constraint_iterations', 10000)):
             value = getattr(self, name)
             _require(isinstance(value, int) and 0 <= value <= upper,
                      f'{name} must be an integer in [0, {upper}], got {value!r}')
@@ -109,6 +116,7 @@ class SolverConfig:
             _require(math.isfinite(value) and 0 < value < 0.5,
                      f'{name} must be in (0, 0.5), got {value!r}')
         _finite_non_negative('air_damping', self.air_damping)
+        _finite_positive('global_stiffness', self.global_stiffness)
         _require(len(self.gravity) == 3 and all(math.isfinite(g) for g in self.gravity),
                  f'gravity must be three finite numbers, got {self.gravity!r}')
 
@@ -135,6 +143,58 @@ class ContactConfig:
 
 
 @dataclass(frozen=True)
+class DamageConfig:
+    """Breakable hinge springs, hinge folds and random damage (SPEC §4, paper Eq. 7–8).
+    Defaults look like 80 g/m² office paper; see ``damage.MATERIAL_PRESETS``."""
+
+    enabled: bool = True
+    fragility: float = 1.0
+    """φ of Eq. 7, P = (1 - l/l0)^φ: large → rubbery, small → fragile."""
+    area_conservation: float = 1.0
+    """ψ of Eq. 8, h = ψ/2·sqrt(l0² - l²); with ψ = 1 the two halves come out at rest length."""
+    fold_threshold: float = 0.6
+    """An interior edge folds when |x_r - x_l| / d0 of its BEND spring falls below this."""
+    check_rate: float = 60.0
+    """Damage checks per simulated second (independent of the sub-step count) [Hz]."""
+    compression_floor: float = 0.01
+    """Compression 1 - l/l0 below which a hinge never breaks (solver tolerance, noise)."""
+    min_breakable_length: float = 1.5e-3
+    """HINGE springs with a shorter rest length do not break [m]."""
+    max_vertices: int = 30000
+    """Vertex cap: at it damage stops (one warning is logged)."""
+    min_crease_ratio: float = 0.6
+    """A crease remembers a broken spring at no less than this × l0; random damage
+    (crumple) draws its l/l0 in [this, 1)."""
+    crumple_fold_fraction: float = 0.5
+    """Share of random-damage events that are folds rather than breaks."""
+
+    def __post_init__(self) -> None:
+        _require(isinstance(self.enabled, bool), f'enabled must be a bool, got {self.enabled!r}')
+        _finite_positive('fragility', self.fragility)
+        _require(self.fragility <= 100, f'fragility must be <= 100, got {self.fragility}')
+        _require(isinstance(self.area_conservation, (int, float))
+                 and 0 <= self.area_conservation <= 2,
+                 f'area_conservation must be in [0, 2], got {self.area_conservation!r}')
+        _require(isinstance(self.fold_threshold, (int, float))
+                 and 0 <= self.fold_threshold < 1,
+                 f'fold_threshold must be in [0, 1), got {self.fold_threshold!r}')
+        _finite_positive('check_rate', self.check_rate)
+        _require(self.check_rate <= 10000, f'check_rate must be <= 10000 Hz, got {self.check_rate}')
+        _require(isinstance(self.compression_floor, (int, float))
+                 and 0 <= self.compression_floor < 1,
+                 f'compression_floor must be in [0, 1), got {self.compression_floor!r}')
+        _finite_non_negative('min_breakable_length', self.min_breakable_length)
+        _require(isinstance(self.max_vertices, int) and 9 <= self.max_vertices <= 10_000_000,
+                 f'max_vertices must be an integer in [9, 10000000], got {self.max_vertices!r}')
+        _require(isinstance(self.min_crease_ratio, (int, float))
+                 and 0 < self.min_crease_ratio < 1,
+                 f'min_crease_ratio must be in (0, 1), got {self.min_crease_ratio!r}')
+        _require(isinstance(self.crumple_fold_fraction, (int, float))
+                 and 0 <= self.crumple_fold_fraction <= 1,
+                 f'crumple_fold_fraction must be in [0, 1], got {self.crumple_fold_fraction!r}')
+
+
+@dataclass(frozen=True)
 class SimulationConfig:
     """Everything the core needs to build and step a sheet."""
 
@@ -142,6 +202,7 @@ class SimulationConfig:
     solver: SolverConfig = field(default_factory=SolverConfig)
     contact: ContactConfig = field(default_factory=ContactConfig)
     seed: int = 0
+    damage: DamageConfig = field(default_factory=DamageConfig)
 
     def __post_init__(self) -> None:
         _require(isinstance(self.seed, int) and 0 <= self.seed < 2**63,

@@ -160,15 +160,11 @@ def jacobi_iterate(diagonal_inverse, coupling, spring_vertices, rhs, pinned, ite
 
 @njit(cache=True)
 def project_springs(positions, inverse_mass, spring_vertices, rest_length, shortest, longest,
-                    reverse, vertex_level, shock):
+                    reverse):
     """One Gauss–Seidel sweep of strain limiting (Provot): a spring longer than
     ``longest`` × l0 or shorter than ``shortest`` × l0 is moved back to that bound, the
     correction shared by inverse mass. ``reverse`` sweeps from the last spring, so that
-    alternating sweeps carry corrections both ways across the sheet.
-
-    With ``shock`` (shock propagation, Guendelman et al. 2003) the end nearer the pins
-    (lower ``vertex_level``) is treated as immovable, so a sweep in level order carries the
-    pins' hold to the far edge in one pass instead of diffusing it a row per sweep."""
+    alternating sweeps carry corrections both ways across the sheet."""
     count = spring_vertices.shape[0]
     for n in range(count):
         s = count - 1 - n if reverse else n
@@ -176,11 +172,6 @@ def project_springs(positions, inverse_mass, spring_vertices, rest_length, short
         j = spring_vertices[s, 1]
         wi = inverse_mass[i]
         wj = inverse_mass[j]
-        if shock:
-            if vertex_level[i] < vertex_level[j]:
-                wi = 0.0
-            elif vertex_level[j] < vertex_level[i]:
-                wj = 0.0
         w = wi + wj
         if w == 0.0:
             continue

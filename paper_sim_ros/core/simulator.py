@@ -1,11 +1,19 @@
 """Steps a sheet: probes in, one frame of physics, state out (SPEC §2–3).
 
-One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps. Each sub-step:
-  # forces and Jacobians   spring_system()
-  # implicit velocity step Eq. 6 Jacobi (or explicit Euler, for comparison)
-  # predict positions      x* = x + h v
+One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps.
+
+'paper' (Eq. 1–6) and 'explicit' sub-steps:
+  # forces and Jacobians   spring_system(), every spring a force
+  # velocity step          Eq. 6 Jacobi from Δv⁽⁰⁾ = W_ii⁻¹ h f̃ (or symplectic Euler)
+  # predict positions      x = x + h v
   # contact                probes (swept) and table, with friction
-  # stretch                'constrained' only: Gauss–Seidel strain limiting + attachments
+  # velocities             v = (x - x_start) / h
+
+'constrained' sub-steps (the default: paper-stiff and real time, SPEC §2):
+  # inertia                y = x + h v + h² f_ext / m
+  # implicit springs       projective iterations: local targets, prefactored global solve
+  # contact                probes (swept) and table, with friction
+  # stretch                Gauss–Seidel strain limiting + long-range attachments + contact
   # velocities             v = (x - x_start) / h, so every projection is velocity-consistent
 """
 from __future__ import annotations
@@ -16,9 +24,9 @@ import numpy as np
 
 from . import kernels
 from .config import SimulationConfig
-import os
-SHOCK=os.environ.get('SHOCK')=='1'
-from .sheet import AUX, BEND, HINGE, Sheet, build_flat_sheet
+from .damage import DamageModel
+from .projective import GlobalStep, local_targets
+from .sheet import AUX, HINGE, Sheet, build_flat_sheet
 
 
 @dataclass
@@ -52,6 +60,10 @@ class Simulator:
         self.frame = 0
         self.nan_seen = False
         self.probes = Probes()
+        # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
+        self.damage = DamageModel(
+            self.config.damage, self.config.seed, self.config.sheet.aux_stiffness,
+            held_inextensible=self.config.solver.method == 'constrained')
         self.topology_changed()
 
     def set_pinned(self, pinned: np.ndarray) -> None:
@@ -88,26 +100,33 @@ class Simulator:
                              active=active.copy())
 
     def topology_changed(self) -> None:
-        """Rebuild what is derived from the mesh: the spring subsets each solver uses,
-        the inverse masses and the long-range attachments to pinned vertices."""
+        """Rebuild what is derived from the mesh or the pins: inverse masses, the
+        constraint sweep order, the long-range attachments and the global step's factor."""
         sheet = self.sheet
-        method = self.config.solver.method
-        kind = sheet.spring_kind
-        if method == 'constrained':
-            force_mask = kind == BEND
-            constraint_springs = np.flatnonzero((kind == HINGE) | (kind == AUX))
-        else:
-            force_mask = np.ones(sheet.spring_count, dtype=bool)
-            constraint_springs = np.zeros(0, dtype=np.int64)
-        self._force_springs = np.flatnonzero(force_mask)
         self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
+        self._global_step = None
+        if self.config.solver.method != 'constrained':
+            self._constraint_springs = np.zeros(0, dtype=np.int64)
+            self._build_attachments()
+            return
+        kind = sheet.spring_kind
+        held = (kind == HINGE) | (kind == AUX)
+        constraint_springs = np.flatnonzero(held)
+        # sweep from the pins outwards, so that one forward sweep carries their hold far
         ends = sheet.spring_vertices[constraint_springs]
-        self._vertex_level = pin_distance_levels(ends, sheet.pinned)
-        # sweep from the pins outwards (level order), so shock propagation can work
-        level = self._vertex_level[ends]
+        level = pin_distance_levels(ends, sheet.pinned)[ends]
         order = np.lexsort((level.max(axis=1), level.min(axis=1)))
         self._constraint_springs = constraint_springs[order]
         self._build_attachments()
+        # held springs enter the global step with a solver weight, the others (BEND) with
+        # their own stiffness: their implicit Euler step
+        self._global_weight = np.where(held, self.config.solver.global_stiffness,
+                                       sheet.spring_stiffness)
+        self._band_limited = held
+        h = self.config.solver.dt / self.config.solver.substeps
+        if np.any(~sheet.pinned):
+            self._global_step = GlobalStep(sheet.vertex_mass, sheet.pinned,
+                                           sheet.spring_vertices, self._global_weight, h)
 
     def _build_attachments(self) -> None:
         sheet = self.sheet
@@ -149,99 +168,129 @@ class Simulator:
             self.nan_seen = True
             self.sheet.positions[:] = saved_positions
             self.sheet.velocities[:] = 0.0
+        # damage: checked at its own rate in simulated time, never per sub-step
+        if self.damage.advance(self.sheet, solver.dt, self.probes):
+            self.topology_changed()
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
         self.frame += 1
 
     def _substep(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray) -> None:
         sheet = self.sheet
-        solver = self.config.solver
-        contact = self.config.contact
         positions, velocities = sheet.positions, sheet.velocities
-        mass = sheet.vertex_mass
         start_positions = positions.copy()
-        force_springs = self._force_springs
-        springs = sheet.spring_vertices[force_springs]
-        gravity = np.asarray(solver.gravity)
-
-        # forces and Jacobians
-        vertex_count = sheet.vertex_count
-        external_force = mass[:, None] * (gravity[None, :] - solver.air_damping * velocities)
-        force = external_force.copy()
-        diagonal = np.zeros((vertex_count, 3, 3))
-        coupling = np.zeros((springs.shape[0], 6))
-        rhs_jv = np.zeros((vertex_count, 3))
-        kernels.spring_system(positions, velocities, springs,
-                              sheet.spring_rest_length[force_springs],
-                              sheet.spring_stiffness[force_springs],
-                              sheet.spring_damping[force_springs], h,
-                              force, diagonal, coupling, rhs_jv)
-
-        if solver.method == 'explicit':
-            delta_v = h * force / mass[:, None]
-            delta_v[sheet.pinned] = 0.0
+        if self.config.solver.method == 'constrained':
+            self._projective_step(h)
         else:
-            # W_ii = m_i (1 + h·air) I + Σ B  (air drag taken implicitly too)
-            diagonal[:, 0, 0] += mass * (1.0 + h * solver.air_damping)
-            diagonal[:, 1, 1] += mass * (1.0 + h * solver.air_damping)
-            diagonal[:, 2, 2] += mass * (1.0 + h * solver.air_damping)
-            diagonal_inverse = np.empty_like(diagonal)
-            kernels.invert_blocks(diagonal, diagonal_inverse)
-            rhs = h * force + rhs_jv
-            if solver.method == 'paper':
-                # Eq. 6, k = 0: Δv⁽⁰⁾ = W_ii⁻¹ h f̃
-                delta_v = np.einsum('vab,vb->va', diagonal_inverse, rhs)
-            else:
-                # start from the velocity change of the external forces alone (gravity, air):
-                # exact for rigid motion, which Eq. 6's start W_ii⁻¹ h f̃ slows by the
-                # factor m / W_ii (~1/500 for paper); Jacobi then adds what springs do
-                delta_v = h * external_force / mass[:, None]
-            delta_v[sheet.pinned] = 0.0
-            kernels.jacobi_iterate(diagonal_inverse, coupling, springs, rhs, sheet.pinned,
-                                   solver.jacobi_iterations, delta_v, np.empty_like(delta_v))
-        velocities += delta_v
-        velocities[sheet.pinned] = 0.0
-        positions += h * velocities
+            self._force_step(h)
 
         # contact (swept probes, then the table), with friction
-        ground = contact.ground_enabled
-        inverse_mass = self._inverse_mass
         self._contact(positions, start_positions, probe_from, probe_to, True)
 
         # stretch: strain limiting, attachments, and contact kept satisfied alongside
         if self._constraint_springs.size:
-            constraint_springs = self._constraint_springs
-            ends = sheet.spring_vertices[constraint_springs]
-            rest = sheet.spring_rest_length[constraint_springs]
-            shortest = 1.0 - solver.max_compression
-            longest = 1.0 + solver.max_stretch
-            level = self._vertex_level
-            for iteration in range(solver.constraint_iterations):
-                for reverse in (False, True):
-                    kernels.project_springs(positions, inverse_mass, ends, rest,
-                                            shortest, longest, reverse, level, False)
-                kernels.project_attachments(positions, self._attached, self._anchor,
-                                            self._attachment_length)
-                if self.probes.count or ground:
-                    self._contact(positions, start_positions, probe_from, probe_to, False)
-            if self._attached.size and SHOCK:
-                kernels.project_springs(positions, inverse_mass, ends, rest,
-                                        shortest, longest, False, level, True)
+            self._limit_strain(positions, start_positions, probe_from, probe_to)
 
         # velocities from the positions actually reached
         velocities[:] = (positions - start_positions) / h
         velocities[sheet.pinned] = 0.0
 
+    def _force_step(self, h: float) -> None:
+        """Every spring a force: the paper's Eq. 6 Jacobi iteration, or symplectic Euler."""
+        sheet = self.sheet
+        solver = self.config.solver
+        positions, velocities, mass = sheet.positions, sheet.velocities, sheet.vertex_mass
+        gravity = np.asarray(solver.gravity)
+        vertex_count = sheet.vertex_count
+        force = mass[:, None] * (gravity[None, :] - solver.air_damping * velocities)
+        diagonal = np.zeros((vertex_count, 3, 3))
+        coupling = np.zeros((sheet.spring_count, 6))
+        rhs_jv = np.zeros((vertex_count, 3))
+        kernels.spring_system(positions, velocities, sheet.spring_vertices,
+                              sheet.spring_rest_length, sheet.spring_stiffness,
+                              sheet.spring_damping, h, force, diagonal, coupling, rhs_jv)
+        if solver.method == 'explicit':
+            delta_v = h * force / mass[:, None]
+        else:
+            # W_ii = m_i (1 + h·air) I + Σ B: air drag taken implicitly too
+            for axis in range(3):
+                diagonal[:, axis, axis] += mass * (1.0 + h * solver.air_damping)
+            diagonal_inverse = np.empty_like(diagonal)
+            kernels.invert_blocks(diagonal, diagonal_inverse)
+            rhs = h * force + rhs_jv  # Eq. 3's right-hand side, h f + h² J v
+            delta_v = np.einsum('vab,vb->va', diagonal_inverse, rhs)  # Eq. 6, k = 0
+            delta_v[sheet.pinned] = 0.0
+            kernels.jacobi_iterate(diagonal_inverse, coupling, sheet.spring_vertices, rhs,
+                                   sheet.pinned, solver.jacobi_iterations, delta_v,
+                                   np.empty_like(delta_v))
+        delta_v[sheet.pinned] = 0.0
+        velocities += delta_v
+        positions += h * velocities
+
+    def _projective_step(self, h: float) -> None:
+        """Implicit Euler of all springs by local/global iterations (core/projective.py),
+        held springs aiming at their strain band, BEND springs at their rest length."""
+        sheet = self.sheet
+        solver = self.config.solver
+        positions, velocities, mass = sheet.positions, sheet.velocities, sheet.vertex_mass
+        free = ~sheet.pinned
+        inertia = positions + h * (1.0 - h * solver.air_damping) * velocities
+        inertia[free] += h * h * np.asarray(solver.gravity)
+        positions[free] = inertia[free]
+        if self._global_step is None:
+            return
+        weighted_inertia = (mass / (h * h))[:, None] * inertia
+        shortest = 1.0 - solver.max_compression
+        longest = 1.0 + solver.max_stretch
+        for _ in range(solver.projective_iterations):
+            rhs = weighted_inertia.copy()
+            local_targets(positions, sheet.pinned, sheet.spring_vertices,
+                          sheet.spring_rest_length, self._global_weight, self._band_limited,
+                          shortest, longest, rhs)
+            self._global_step.solve(rhs, positions)
+
+    def _limit_strain(self, positions, start_positions, probe_from, probe_to) -> None:
+        solver = self.config.solver
+        ends = self.sheet.spring_vertices[self._constraint_springs]
+        rest = self.sheet.spring_rest_length[self._constraint_springs]
+        shortest = 1.0 - solver.max_compression
+        longest = 1.0 + solver.max_stretch
+        for _ in range(solver.constraint_iterations):
+            for reverse in (False, True):
+                kernels.project_springs(positions, self._inverse_mass, ends, rest,
+                                        shortest, longest, reverse)
+            kernels.project_attachments(positions, self._attached, self._anchor,
+                                        self._attachment_length)
+            self._contact(positions, start_positions, probe_from, probe_to, False)
+
     def _contact(self, positions, start_positions, probe_from, probe_to, with_friction):
         contact = self.config.contact
-        if self.probes.count:
-            kernels.project_probes(positions, start_positions, self._inverse_mass,
-                                   probe_from, probe_to, self.probes.radius,
-                                   self.probes.active, contact.probe_friction, with_friction)
+        # the table first, so that a probe pressed into it has the last word: the table
+        # yields under a probe like a desk mat, and the sheet dimples into it
         if contact.ground_enabled:
             kernels.project_ground(positions, start_positions, self._inverse_mass,
                                    contact.ground_height, contact.ground_friction,
                                    with_friction)
+        if self.probes.count:
+            kernels.project_probes(positions, start_positions, self._inverse_mass,
+                                   probe_from, probe_to, self.probes.radius,
+                                   self.probes.active, contact.probe_friction, with_friction)
+
+    # ------------------------------------------------------------------------- damage
+    def crumple(self, count: int, seed: int) -> None:
+        """Random damage (SPEC §4.3): ``count`` random breaks and folds, seeded."""
+        self.damage.crumple(self.sheet, count, seed)
+        self.topology_changed()
+
+    @property
+    def breaks(self) -> int:
+        """HINGE springs broken since the last reset."""
+        return self.damage.breaks
+
+    @property
+    def folds(self) -> int:
+        """Edges folded since the last reset."""
+        return self.damage.folds
 
     # ------------------------------------------------------------------------ metrics
     def max_strain(self) -> float:

@@ -1,0 +1,147 @@
+"""The global step of the 'projective' solver (Liu et al. 2013, "Fast Simulation of
+Mass-Spring Systems"; Bouaziz et al. 2014): implicit Euler for springs as alternating
+local and global steps.
+
+  local:  each spring's target vector d_s = (its length clamped into the band, or its
+          rest length) × its current direction;
+  global: (M/h² + Σ k_s A_sᵀ A_s) x = M y / h² + Σ k_s A_sᵀ d_s,  y = x + h v + h² f_ext / m.
+
+The matrix depends only on masses, springs and h, so it is factorised once per mesh
+change and every iteration is two sparse triangular solves: a correction reaches the
+whole sheet in one iteration, where Jacobi (Eq. 6) or Gauss–Seidel sweeps move it one
+vertex per sweep. That reach is what paper's stiffness needs (SPEC §2).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+import scipy.sparse as sparse
+import scipy.sparse.linalg as sparse_linalg
+
+from .kernels import EPSILON_LENGTH
+
+
+@njit(cache=True)
+def local_targets(positions, pinned, spring_vertices, rest_length, weight, band_limited,
+                  shortest, longest, rhs):
+    """Add Σ k_s A_sᵀ d_s to ``rhs`` (V,3), and the pinned ends' k_s x_p to their free
+    neighbours (pinned vertices are not unknowns of the global step)."""
+    for s in range(spring_vertices.shape[0]):
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        k = weight[s]
+        if length > EPSILON_LENGTH:
+            target = rest_length[s]
+            if band_limited[s]:
+                target = min(max(length, shortest * rest_length[s]), longest * rest_length[s])
+            scale = k * target / length
+            rhs[j, 0] += scale * dx
+            rhs[j, 1] += scale * dy
+            rhs[j, 2] += scale * dz
+            rhs[i, 0] -= scale * dx
+            rhs[i, 1] -= scale * dy
+            rhs[i, 2] -= scale * dz
+        if pinned[j]:
+            rhs[i, 0] += k * positions[j, 0]
+            rhs[i, 1] += k * positions[j, 1]
+            rhs[i, 2] += k * positions[j, 2]
+        if pinned[i]:
+            rhs[j, 0] += k * positions[i, 0]
+            rhs[j, 1] += k * positions[i, 1]
+            rhs[j, 2] += k * positions[i, 2]
+
+
+@njit(cache=True)
+def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upper_pointer,
+                    upper_index, upper_value, upper_diagonal, row_permutation,
+                    column_permutation, free, rhs, positions, work):
+    """positions[free] ← A⁻¹ rhs[free] from SuperLU's Pr A Pc = L U. The factors are in
+    CSC with their diagonals held apart (``*_diagonal``), so each loop streams once."""
+    count = free.shape[0]
+    for k in range(count):
+        v = free[k]
+        row = row_permutation[k]
+        work[row, 0] = rhs[v, 0]
+        work[row, 1] = rhs[v, 1]
+        work[row, 2] = rhs[v, 2]
+    for column in range(count):  # L z = Pr b, column oriented
+        scale = 1.0 / lower_diagonal[column]
+        z0 = work[column, 0] * scale
+        z1 = work[column, 1] * scale
+        z2 = work[column, 2] * scale
+        work[column, 0] = z0
+        work[column, 1] = z1
+        work[column, 2] = z2
+        for p in range(lower_pointer[column], lower_pointer[column + 1]):
+            row = lower_index[p]
+            value = lower_value[p]
+            work[row, 0] -= value * z0
+            work[row, 1] -= value * z1
+            work[row, 2] -= value * z2
+    for column in range(count - 1, -1, -1):  # U w = z
+        scale = 1.0 / upper_diagonal[column]
+        z0 = work[column, 0] * scale
+        z1 = work[column, 1] * scale
+        z2 = work[column, 2] * scale
+        work[column, 0] = z0
+        work[column, 1] = z1
+        work[column, 2] = z2
+        for p in range(upper_pointer[column], upper_pointer[column + 1]):
+            row = upper_index[p]
+            value = upper_value[p]
+            work[row, 0] -= value * z0
+            work[row, 1] -= value * z1
+            work[row, 2] -= value * z2
+    for k in range(count):  # x = Pc w
+        source = column_permutation[k]
+        v = free[k]
+        positions[v, 0] = work[source, 0]
+        positions[v, 1] = work[source, 1]
+        positions[v, 2] = work[source, 2]
+
+
+def _split_diagonal(matrix) -> tuple:
+    """CSC arrays of the strictly off-diagonal part (int32 indices) and the diagonal."""
+    matrix = matrix.tocoo()
+    on_diagonal = matrix.row == matrix.col
+    diagonal = np.ones(matrix.shape[0])
+    diagonal[matrix.row[on_diagonal]] = matrix.data[on_diagonal]
+    off = sparse.csc_matrix((matrix.data[~on_diagonal],
+                             (matrix.row[~on_diagonal], matrix.col[~on_diagonal])),
+                            shape=matrix.shape)
+    off.sort_indices()
+    return (off.indptr.astype(np.int32), off.indices.astype(np.int32), off.data, diagonal)
+
+
+class GlobalStep:
+    """The prefactored global step for one mesh, pin set and sub-step length."""
+
+    def __init__(self, vertex_mass: np.ndarray, pinned: np.ndarray,
+                 spring_vertices: np.ndarray, weight: np.ndarray, h: float) -> None:
+        vertex_count = vertex_mass.shape[0]
+        first, second = spring_vertices[:, 0], spring_vertices[:, 1]
+        laplacian = sparse.coo_matrix(
+            (np.concatenate([weight, weight, -weight, -weight]),
+             (np.concatenate([first, second, first, second]),
+              np.concatenate([first, second, second, first]))),
+            shape=(vertex_count, vertex_count)).tocsr()
+        system = sparse.diags(vertex_mass / (h * h)) + laplacian
+        self.free = np.flatnonzero(~pinned).astype(np.int64)
+        self.inertia = vertex_mass / (h * h)
+        reduced = system[self.free][:, self.free].tocsc()
+        # symmetric positive definite: no pivoting needed, minimum degree on Aᵀ + A
+        factor = sparse_linalg.splu(reduced, permc_spec='MMD_AT_PLUS_A',
+                                    diag_pivot_thresh=0.0,
+                                    options={'SymmetricMode': True})
+        self._factors = (_split_diagonal(factor.L) + _split_diagonal(factor.U)
+                         + (factor.perm_r.astype(np.int32), factor.perm_c.astype(np.int32)))
+        self._work = np.zeros((self.free.size, 3))
+        self.factor_size = int(factor.L.nnz + factor.U.nnz)
+
+    def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
+        """Overwrite the free vertices of ``positions`` with the global step's solution."""
+        _solve_factored(*self._factors, self.free, rhs, positions, self._work)
