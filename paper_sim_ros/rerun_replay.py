@@ -110,12 +110,15 @@ def _temporal_rows(chunks: list, entity: str, component: str) -> list[tuple[int,
 
 
 def _static_text(chunks: list, component: str) -> str | None:
+    """The last logged value of a static text component of ``paper/info`` (static chunks may
+    hold several rows, each with some of the components)."""
+    found = None
     for chunk in chunks:
         if _entity(chunk) == ENTITY_INFO and chunk.is_static:
-            values = _column(chunk.to_record_batch(), component)
-            if values and values[-1]:
-                return values[-1][0]
-    return None
+            for value in _column(chunk.to_record_batch(), component) or []:
+                if value:
+                    found = value[0]
+    return found
 
 
 def read_recording_info(path: str, chunks: list | None = None) -> dict:
@@ -139,10 +142,12 @@ def read_parameters(path: str, chunks: list | None = None) -> dict:
     return json.loads(text)
 
 
-def read_probe_inputs(path: str, chunks: list | None = None) -> list[ProbeInput]:
-    """The probe inputs of every recorded frame, in frame order."""
+def read_probe_inputs(path: str, chunks: list | None = None,
+                      check_resets: bool = True) -> list[ProbeInput]:
+    """The probe inputs of every recorded frame, in sim_time order. Raises ``ValueError`` when
+    the frame counter went back (the session was reset): such a session is several runs."""
     chunks = chunks if chunks is not None else read_chunks(path)
-    inputs = {}
+    inputs = []
     for chunk in chunks:
         if _entity(chunk) != ENTITY_PROBE_INPUTS or chunk.is_static:
             continue
@@ -152,12 +157,23 @@ def read_probe_inputs(path: str, chunks: list | None = None) -> list[ProbeInput]
         centers, radii, active = (batch.column(name).to_pylist()
                                   for name in ('centers', 'radii', 'active'))
         for row in range(batch.num_rows):
-            inputs[frames[row]] = ProbeInput(
+            inputs.append(ProbeInput(
                 frame=frames[row], sim_time=times[row],
                 centers=np.asarray(centers[row], dtype=np.float64).reshape(-1, 3),
                 radii=np.asarray(radii[row], dtype=np.float64),
-                active=np.asarray(active[row], dtype=bool))
-    return [inputs[frame] for frame in sorted(inputs)]
+                active=np.asarray(active[row], dtype=bool)))
+    inputs.sort(key=lambda item: (item.sim_time, item.frame))
+    if check_resets:
+        _refuse_resets(path, inputs)
+    return inputs
+
+
+def _refuse_resets(path: str, inputs: list[ProbeInput]) -> None:
+    for before, after in zip(inputs, inputs[1:]):
+        if after.frame <= before.frame:
+            raise ValueError(f'{path}: the frame counter restarts at sim_time '
+                             f'{after.sim_time:.3f} s (the session was reset there); a replay '
+                             f'covers one run from its start')
 
 
 def read_mesh_frames(path: str, chunks: list | None = None) -> list[MeshFrame]:
@@ -212,7 +228,7 @@ def summary(path: str) -> dict:
     """A compact description of a recording: what a test or a user checks first."""
     chunks = read_chunks(path)
     meshes = read_mesh_frames(path, chunks)
-    inputs = read_probe_inputs(path, chunks)
+    inputs = read_probe_inputs(path, chunks, check_resets=False)
     return {
         'complete': is_complete(path),
         'recording_info': read_recording_info(path, chunks),
@@ -231,10 +247,10 @@ def summary(path: str) -> dict:
 class RecordedScenario:
     """A scenario whose probe inputs are the recorded ones, frame by frame.
 
-    Duck-types ``core.scenarios.Scenario`` for the headless runner: ``name``, ``config``,
-    ``frame_count``, ``pinned_mask`` and ``probe_inputs(time)``, where ``time`` is the end of
-    frame k = round(time / dt) (the headless runner's convention). A frame with no recorded
-    input keeps the latest earlier one (Rerun's latest-at), and ``exact`` is False then.
+    Stands in for ``core.scenarios.Scenario`` in the headless runner: ``frame_count`` and
+    ``probe_inputs(time)`` come from the recording, everything else from the scenario.
+    ``time`` is the end of frame k = round(time / dt) (the runner's convention). A frame with
+    no recorded input keeps the latest earlier one (Rerun's latest-at); ``exact`` is False then.
     """
 
     def __init__(self, scenario, inputs: list[ProbeInput]) -> None:
@@ -242,11 +258,6 @@ class RecordedScenario:
             raise ValueError('the recording has no probe inputs: no frame was recorded')
         self.scenario = scenario
         self.name = f'{scenario.name} (replay)'
-        self.description = scenario.description
-        self.pin = scenario.pin
-        self.config = scenario.config
-        self.mapping = scenario.mapping
-        self.probes = scenario.probes
         self.duration = inputs[-1].frame * scenario.config.solver.dt
         self.frame_count = int(inputs[-1].frame)
         self._by_frame = {item.frame: item for item in inputs}
@@ -254,8 +265,11 @@ class RecordedScenario:
         self.exact = frames == list(range(1, self.frame_count + 1))
         self._frames = np.array(frames)
 
-    def pinned_mask(self, sheet) -> np.ndarray:
-        return self.scenario.pinned_mask(sheet)
+    def __getattr__(self, name: str):
+        # everything else (config, pin, crumple, ...) is the recorded scenario's own
+        if name == 'scenario':
+            raise AttributeError(name)
+        return getattr(self.scenario, name)
 
     def probe_inputs_at_frame(self, frame: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centres, radii and active flags recorded for ``frame`` (1-based: the state after
@@ -313,6 +327,16 @@ def _differences(rebuilt: Any, recorded: Any, prefix: str = 'config') -> list[st
     return [] if rebuilt == recorded else [f'{prefix}: {recorded!r} recorded, {rebuilt!r} now']
 
 
+def _mapping_from_config(config) -> dict:
+    """A scenario mapping holding exactly ``config`` (every config section, and the seed)."""
+    mapping: dict[str, Any] = {'name': 'recorded session', 'seed': config.seed}
+    for spec in dataclasses.fields(config):
+        value = getattr(config, spec.name)
+        if dataclasses.is_dataclass(value):
+            mapping[spec.name] = dataclasses.asdict(value)
+    return mapping
+
+
 def recorded_scenario(path: str, chunks: list | None = None) -> RecordedScenario:
     """Rebuild the recorded scenario and check it against the recorded parameters."""
     from .core.scenarios import scenario_from_mapping
@@ -322,8 +346,12 @@ def recorded_scenario(path: str, chunks: list | None = None) -> RecordedScenario
     parameters = read_parameters(path, chunks)
     mapping = info.get('scenario')
     if not isinstance(mapping, dict):
-        raise ValueError(f'{path}: the recording names no scenario (recording_info has no '
-                         f'"scenario" mapping), so it cannot be re-run')
+        # a session without a scenario (the node's): the scenario is its recorded parameters,
+        # with no probe tracks of its own; the pins come from the recording (see replay)
+        if 'config' not in parameters:
+            raise ValueError(f'{path}: the recording has neither a scenario nor its '
+                             f'parameters, so it cannot be re-run')
+        mapping = _mapping_from_config(config_from_dict(parameters['config']))
     scenario = scenario_from_mapping(mapping)
     recorded = parameters.get('config')
     if recorded is not None:
@@ -346,12 +374,17 @@ def replay(path: str, rrd: str | None = None,
     scenario = recorded_scenario(path, chunks)
     parameters = read_parameters(path, chunks)
     simulator = build_simulator(scenario)
-    initial = parameters.get('initial_positions_sha256')
-    if initial is not None and simulator.sheet.positions_sha256() != initial:
-        raise ValueError(f'{path}: the rebuilt initial sheet differs from the recorded one')
     pinned = parameters.get('pinned_vertices')
+    if pinned is not None and 'scenario' not in read_recording_info(path, chunks):
+        mask = np.zeros(simulator.sheet.vertex_count, dtype=bool)
+        mask[np.asarray(pinned, dtype=np.int64)] = True
+        simulator.set_pinned(mask)
     if pinned is not None and np.flatnonzero(simulator.sheet.pinned).tolist() != pinned:
         raise ValueError(f'{path}: the rebuilt sheet pins other vertices than the recording')
+    initial = parameters.get('initial_positions_sha256')
+    rebuilt = getattr(simulator, 'initial_sheet', simulator.sheet)  # as the recorder hashed it
+    if initial is not None and rebuilt.positions_sha256() != initial:
+        raise ValueError(f'{path}: the rebuilt initial sheet differs from the recorded one')
     recorder = None
     callback = on_frame
     if rrd:
@@ -388,9 +421,10 @@ def replay_command(args) -> int:
 
     from .headless import _raise_keyboard_interrupt
 
-    overrides = [f'--{name.replace("_", "-")}' for name in
-                 ('grid', 'duration', 'dt', 'substeps', 'seed', 'solver')
-                 if getattr(args, name, None) is not None]
+    # every other option would change the run the recording describes
+    overrides = [f'--{name.replace("_", "-")}' for name, value in sorted(vars(args).items())
+                 if name not in ('replay', 'rrd', 'metrics_json', 'scenario')
+                 and value is not None and value is not False]
     try:
         if overrides:
             raise ValueError(f'--replay takes the scenario and every parameter from the '

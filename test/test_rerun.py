@@ -1,0 +1,318 @@
+"""Rerun recording (SPEC §8, issue 6): every test reads the real .rrd back with Rerun's own API
+(``rerun.chunk.RrdReader``), never a mock of it."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+import yaml
+
+from paper_sim_ros import rerun_replay
+from paper_sim_ros.core.scenarios import scenario_from_mapping
+from paper_sim_ros.headless import build_simulator, main as headless_main, run_scenario
+from paper_sim_ros.rerun_logger import RerunRecorder
+
+REPO = Path(__file__).resolve().parents[1]
+METRICS = ('step_time', 'real_time_factor', 'energy', 'max_strain', 'breaks', 'folds')
+
+# Two fingertips press a small sheet on a table and push towards each other: it buckles and
+# breaks (damage driven by the probe inputs), 17 x 17 vertices, 1 s.
+PINCH = {
+    'name': 'pinch',
+    'description': 'two probes squeeze a small sheet on a table until it creases',
+    'duration': 1.0,
+    'seed': 7,
+    'sheet': {'nx': 17, 'ny': 17, 'width': 0.1, 'height': 0.1},
+    'contact': {'ground_enabled': True},
+    'damage': {'fragility': 0.5},
+    'probes': [
+        {'name': 'left', 'radius': 0.012,
+         'keyframes': [[0.0, 0.0, -0.04, 0.03], [0.25, 0.0, -0.04, 0.011],
+                       [0.9, 0.0, -0.01, 0.011], [1.0, 0.0, -0.01, 0.03]]},
+        {'name': 'right', 'radius': 0.012,
+         'keyframes': [[0.0, 0.0, 0.04, 0.03], [0.25, 0.0, 0.04, 0.011],
+                       [0.9, 0.0, 0.01, 0.011], [1.0, 0.0, 0.01, 0.03]]},
+    ],
+}
+
+
+def record(mapping: dict, path: Path, probe_inputs=None, **recorder_options) -> dict:
+    """Run ``mapping`` with a recorder; what the simulator was at every frame, for comparing."""
+    scenario = scenario_from_mapping(mapping)
+    simulator = build_simulator(scenario)
+    dt = scenario.config.solver.dt
+    truth = {'vertex_counts': [], 'positions': [], 'topology_changes': 0, 'inputs': []}
+    triangles = [None]
+    recorder = RerunRecorder('paper_sim_test', path=str(path),
+                             recording_info={'scenario': scenario.mapping}, **recorder_options)
+    try:
+        for frame in range(1, scenario.frame_count + 1):
+            inputs = (probe_inputs or scenario.probe_inputs)(frame * dt)
+            simulator.set_probes(*inputs)
+            simulator.step_frame()
+            sheet = simulator.sheet
+            truth['vertex_counts'].append(sheet.vertex_count)
+            truth['positions'].append(sheet.positions.copy())
+            truth['inputs'].append(inputs)
+            if triangles[0] is None or not np.array_equal(triangles[0], sheet.triangles):
+                truth['topology_changes'] += 1
+                triangles[0] = sheet.triangles.copy()
+            recorder.log_frame(simulator.time, simulator,
+                               scalars={'step_time': 1e-3, 'real_time_factor': 16.7})
+    finally:
+        recorder.close()
+    truth['final_sha256'] = simulator.sheet.positions_sha256()
+    truth['breaks'] = simulator.breaks
+    truth['frames'] = scenario.frame_count
+    truth['dt'] = dt
+    truth['config'] = simulator.config
+    return truth
+
+
+@pytest.fixture(scope='module')
+def pinch_recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp('rerun') / 'pinch.rrd'
+    truth = record(PINCH, path)
+    assert truth['breaks'] > 0, 'the pinch scenario should damage the sheet'
+    return path, truth
+
+
+def chunks_of(path: Path, entity: str) -> list:
+    return [c for c in RrdReader(path).stream() if c.entity_path == '/' + entity]
+
+
+# ------------------------------------------------------------------------- reading back
+def test_mesh_has_one_row_per_frame_with_the_simulation_vertex_counts(pinch_recording):
+    path, truth = pinch_recording
+    store = RrdReader(path).store()  # the footer is there: the recording was finished
+    assert '/paper/mesh' in store.summary()
+    assert any(column.name.endswith('Mesh3D:vertex_positions')
+               for column in store.schema().component_columns()), store.schema()
+    rows = []
+    for chunk in chunks_of(path, 'paper/mesh'):
+        if chunk.is_static:
+            continue
+        assert 'sim_time' in chunk.timeline_names
+        batch = chunk.to_record_batch()
+        times = batch.column('sim_time').cast('int64').to_pylist()
+        positions = batch.column('Mesh3D:vertex_positions')
+        for row in range(batch.num_rows):
+            flat = positions[row].values.flatten().to_numpy(zero_copy_only=False)
+            rows.append((times[row], flat.reshape(-1, 3)))
+    rows.sort(key=lambda row: row[0])
+    assert len(rows) == truth['frames'], 'one mesh row per frame'
+    expected_times = [round(1e9 * k * truth['dt']) for k in range(1, truth['frames'] + 1)]
+    np.testing.assert_allclose([t for t, _ in rows], expected_times, atol=2,
+                               err_msg='sim_time of the mesh rows')
+    counts = [p.shape[0] for _, p in rows]
+    assert counts == truth['vertex_counts'], 'vertex counts per frame'
+    assert counts[-1] > counts[0], 'damage grew the mesh during the recording'
+    for (_, logged), actual in zip(rows, truth['positions']):
+        assert np.all(np.isfinite(logged))
+        np.testing.assert_allclose(logged, actual, atol=1e-6, err_msg='logged positions')
+
+
+def test_topology_is_logged_only_when_the_mesh_changes(pinch_recording):
+    path, truth = pinch_recording
+    frames = rerun_replay.read_mesh_frames(str(path))
+    changed = [mesh for mesh in frames if mesh.triangle_count is not None]
+    assert len(changed) == truth['topology_changes']
+    assert 1 < len(changed) < len(frames)
+
+
+def test_scalar_series_are_present(pinch_recording):
+    path, truth = pinch_recording
+    series = rerun_replay.read_scalars(str(path))
+    for name in METRICS + ('vertices',):
+        times, values = series[name]
+        assert len(values) == truth['frames'], name
+        assert np.all(np.isfinite(values)), name
+    assert series['breaks'][1][-1] == truth['breaks']
+    assert series['vertices'][1].tolist() == truth['vertex_counts']
+    assert np.all(np.diff(series['breaks'][1]) >= 0)
+
+
+def test_recording_is_self_describing(pinch_recording):
+    path, truth = pinch_recording
+    info = rerun_replay.read_recording_info(str(path))
+    assert info['scenario'] == scenario_from_mapping(PINCH).mapping
+    assert info['scenario']['seed'] == 7
+    parameters = rerun_replay.read_parameters(str(path))
+    assert parameters['config'] == json.loads(json.dumps(dataclasses.asdict(truth['config'])))
+    assert rerun_replay.config_from_dict(parameters['config']) == truth['config']
+    reader = RrdReader(path)
+    assert len(reader.blueprints()) == 1, 'a default blueprint travels with the recording'
+    # probe inputs: every frame, bit for bit what the simulator got
+    inputs = rerun_replay.read_probe_inputs(str(path))
+    assert [item.frame for item in inputs] == list(range(1, truth['frames'] + 1))
+    for item, (centers, radii, active) in zip(inputs, truth['inputs']):
+        np.testing.assert_array_equal(item.centers[item.active], centers[active])
+        np.testing.assert_array_equal(item.radii, radii)
+        np.testing.assert_array_equal(item.active, active)
+
+
+def test_springs_and_probes_are_logged(pinch_recording):
+    path, truth = pinch_recording
+    for entity in ('paper/springs/hinge', 'paper/springs/aux', 'paper/probes'):
+        temporal = [c for c in chunks_of(path, entity) if not c.is_static]
+        assert sum(c.num_rows for c in temporal) > 0, entity
+    hinge = [c for c in chunks_of(path, 'paper/springs/hinge') if not c.is_static]
+    assert sum(c.num_rows for c in hinge) == truth['frames']
+
+
+# --------------------------------------------------------------------------- bad output
+def test_unwritable_path_is_a_clear_error(tmp_path):
+    with pytest.raises(OSError, match='does not exist'):
+        RerunRecorder('t', path=str(tmp_path / 'missing' / 'x.rrd'))
+    with pytest.raises(ValueError, match='is a directory'):
+        RerunRecorder('t', path=str(tmp_path))
+    with pytest.raises(ValueError, match='must end in .rrd'):
+        RerunRecorder('t', path=str(tmp_path / 'x.txt'))
+    with pytest.raises(OSError, match='cannot write Rerun recording'):
+        RerunRecorder('t', path='/proc/paper_sim_test.rrd')  # unwritable, even for root
+    with pytest.raises(ValueError, match='rerun_connect'):
+        RerunRecorder('t', connect_url='http://localhost:9876')
+
+
+def test_headless_refuses_an_unwritable_rrd_before_running(tmp_path, capsys):
+    target = tmp_path / 'missing' / 'run.rrd'
+    code = headless_main(['--scenario', 'press', '--grid', '17', '--duration', '0.1',
+                          '--rrd', str(target)])
+    assert code == 2
+    error = capsys.readouterr().err
+    assert 'cannot write Rerun recording' in error and str(target) in error
+    assert '"final_positions_sha256"' not in capsys.readouterr().out
+
+
+def test_recorder_off_is_a_no_op_and_close_is_idempotent(tmp_path):
+    scenario = scenario_from_mapping({**PINCH, 'duration': 0.05})
+    simulator = build_simulator(scenario)
+    simulator.step_frame()
+    off = RerunRecorder('t')
+    assert not off.enabled
+    off.log_frame(simulator.time, simulator)
+    off.close()
+    off.close()
+    path = tmp_path / 'twice.rrd'
+    on = RerunRecorder('t', path=str(path), recording_info={'scenario': scenario.mapping})
+    on.log_frame(simulator.time, simulator)
+    on.close()
+    on.close()
+    on.log_frame(simulator.time, simulator)  # after close: ignored, file stays complete
+    assert rerun_replay.summary(str(path))['mesh_rows'] == 1
+    assert rerun_replay.is_complete(str(path))
+
+
+# ------------------------------------------------------------------------------- replay
+def test_replay_reproduces_the_recorded_run_with_damage(pinch_recording, tmp_path):
+    path, truth = pinch_recording
+    metrics = rerun_replay.replay(str(path), rrd=str(tmp_path / 'again.rrd'))
+    assert metrics['replay_exact']
+    assert metrics['replay_frames'] == truth['frames']
+    assert metrics['breaks'] == truth['breaks'] > 0
+    assert metrics['final_positions_sha256'] == truth['final_sha256']
+    again = rerun_replay.summary(str(tmp_path / 'again.rrd'))
+    assert again['mesh_rows'] == truth['frames']
+    assert again['recording_info']['replay_of'] == str(path)
+
+
+def test_replay_uses_the_recorded_inputs_not_the_scenario_tracks(tmp_path):
+    """A session whose probes wandered off the scenario's keyframes (a person or a robot
+    driving them): the replay follows what was recorded."""
+    scenario = scenario_from_mapping(PINCH)
+    rng = np.random.default_rng(3)
+
+    def wobbly(time: float):
+        centers, radii, active = scenario.probe_inputs(time)
+        return centers + rng.normal(0.0, 0.002, centers.shape), radii, active
+
+    path = tmp_path / 'wobbly.rrd'
+    truth = record(PINCH, path, probe_inputs=wobbly)
+    plain = run_scenario(scenario)
+    assert plain['final_positions_sha256'] != truth['final_sha256']
+    metrics = rerun_replay.replay(str(path))
+    assert metrics['final_positions_sha256'] == truth['final_sha256']
+
+
+def test_headless_replay_command(pinch_recording, tmp_path, capsys):
+    path, truth = pinch_recording
+    out = tmp_path / 'metrics.json'
+    assert headless_main(['--replay', str(path), '--metrics-json', str(out)]) == 0
+    assert json.loads(out.read_text())['final_positions_sha256'] == truth['final_sha256']
+    assert headless_main(['--replay', str(path), '--seed', '3']) == 2
+    assert 'cannot be combined with --seed' in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ interrupted sessions
+def _whole_frames(path: Path) -> dict:
+    """Rows per entity of an interrupted recording: all equal when it ends on a whole frame."""
+    summary = rerun_replay.summary(str(path))
+    series = rerun_replay.read_scalars(str(path))
+    rows = {'mesh': summary['mesh_rows'], 'inputs': summary['probe_input_rows']}
+    rows.update({name: len(series[name][1]) for name in METRICS})
+    return rows
+
+
+def _wait_for_frames(path: Path, process: subprocess.Popen, minimum_bytes: int,
+                     timeout: float = 120.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if process.poll() is not None:
+            raise AssertionError(f'process exited early ({process.returncode})')
+        if path.exists() and path.stat().st_size >= minimum_bytes:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f'{path} did not grow to {minimum_bytes} bytes in {timeout} s')
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM])
+def test_headless_interrupted_recording_is_complete_and_replayable(tmp_path, signal_number):
+    scenario_file = tmp_path / 'long_pinch.yaml'
+    scenario_file.write_text(yaml.safe_dump({**PINCH, 'duration': 600.0}))
+    path = tmp_path / 'interrupted.rrd'
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'paper_sim_ros.headless', '--scenario', str(scenario_file),
+         '--rrd', str(path)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        _wait_for_frames(path, process, 400_000)
+        process.send_signal(signal_number)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 130, stderr.decode()
+    assert b'interrupted' in stderr
+    assert rerun_replay.is_complete(str(path)), 'the footer was written on the way out'
+    rows = _whole_frames(path)
+    frames = rows['mesh']
+    assert 0 < frames < 36000, rows
+    assert set(rows.values()) == {frames}, f'the recording ends on a whole frame: {rows}'
+    meshes = rerun_replay.read_mesh_frames(str(path))
+    assert [m.frame for m in meshes] == list(range(1, frames + 1))
+    assert all(np.all(np.isfinite(m.positions)) for m in meshes)
+    # re-run up to the interruption: the same sheet as the last recorded frame
+    metrics = rerun_replay.replay(str(path))
+    assert metrics['replay_frames'] == frames and metrics['replay_exact']
+    replayed = rerun_replay.read_mesh_frames(str(path))[-1].positions
+    simulator_final = _replayed_positions(path)
+    assert simulator_final.shape == replayed.shape
+    np.testing.assert_allclose(simulator_final, replayed, atol=1e-6,
+                               err_msg='replay of the interrupted session')
+
+
+def _replayed_positions(path: Path) -> np.ndarray:
+    final = {}
+
+    def keep(simulator, step_seconds):
+        final['positions'] = simulator.sheet.positions.copy()
+    rerun_replay.replay(str(path), on_frame=keep)
+    return final['positions']
