@@ -10,6 +10,7 @@
 - shading_levels.png   texture only, full-detail, level-2 and level-4 normals (Fig. 10)
 - level_seams.png      level-4 normals: the paper's bilinear patches vs the spline used
 - aged_settling.png    the aged sheet dropped on a table under the Simulator (defaults)
+- aged_crumpled.png    an aged sheet after random damage, shaded through the mesh changes
 - printed_page.png     an image file mapped on an aged sheet (Fig. 11); its source image
                        is written as printed_page_source.png
 
@@ -29,7 +30,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from paper_sim_ros.core.appearance import (
     AppearanceConfig, PaperAppearance, local_frames, sample_texture)
-from paper_sim_ros.core.config import ContactConfig, SheetConfig, SimulationConfig
+from paper_sim_ros.core.config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig
 from paper_sim_ros.core.fractal import (
     aged_surface, bilinear_upsample, build_aged_sheet, fractal_height_levels, fractal_heights,
     grid_exponent, lowpass_filter, outline_area, restore_side_lengths)
@@ -308,6 +309,26 @@ def settling_picture(out: Path) -> None:
     Image.fromarray(tile(panels, 2)).save(out / 'aged_settling.png', optimize=True)
 
 
+def crumpled_picture(out: Path) -> None:
+    """An aged sheet crumpled by random damage (SPEC §4.3: breaks insert vertices) and
+    relaxed without gravity: the level-2 shading is carried through every mesh change."""
+    sheet_config = SheetConfig()
+    sheet = build_aged_sheet(sheet_config, 0.008, None, seed=3)
+    simulator = Simulator(SimulationConfig(sheet=sheet_config, solver=SolverConfig(
+        gravity=(0.0, 0.0, 0.0), air_damping=3.0)), sheet)
+    appearance = PaperAppearance(AppearanceConfig(light_direction=FIGURE_LIGHT),
+                                 simulator.initial_sheet)
+    simulator.crumple(300, 1)
+    for _ in range(120):
+        simulator.step_frame()
+    current = simulator.sheet
+    image = textured_render(appearance, current, appearance.vertex_light(current),
+                            (560, 540), view_rotation(-25, 45), 0.34)
+    text = (f'crumpled: {current.vertex_count - sheet.vertex_count} vertices inserted, '
+            f'level-2 normals')
+    Image.fromarray(label(image, text)).save(out / 'aged_crumpled.png', optimize=True)
+
+
 def page_image(path: Path) -> None:
     """A printed page to map on the sheet: title, text lines and a radial figure."""
     width, height = 840, 1188
@@ -403,6 +424,7 @@ def main() -> None:
     shading_levels_picture(args.out)
     level_seams_picture(args.out)
     settling_picture(args.out)
+    crumpled_picture(args.out)
     printed_page_picture(args.out)
     print(f'wrote pictures to {args.out}')
 
