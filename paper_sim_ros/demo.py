@@ -67,6 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init(args=['--ros-args', '--params-file', str(default_params_file())])
     executor = SingleThreadedExecutor()
     nodes = []
+    started = time.monotonic()
     interrupted = False
     try:
         simulation = PaperSimNode(parameter_overrides=[
@@ -84,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f'paper_sim demo: {arguments.duration:g} s, grid {arguments.grid}, ROS domain '
               f'{os.environ.get("ROS_DOMAIN_ID", "0")}; topics /paper/markers /paper/points '
               f'/diagnostics', flush=True)
-        end = time.monotonic() + arguments.duration
+        started = time.monotonic()
+        end = started + arguments.duration
         while time.monotonic() < end and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -93,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'paper_sim demo: cannot start: {error}', file=sys.stderr)
         return 1
     finally:
-        summary = _summary(nodes[0]) if nodes else None
+        summary = _summary(nodes[0], time.monotonic() - started) if nodes else None
         for node in reversed(nodes):
             executor.remove_node(node)
             node.destroy_node()
@@ -107,12 +109,16 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _summary(simulation: PaperSimNode) -> str:
+def _summary(simulation: PaperSimNode, wall_seconds: float) -> str:
     simulator = simulation.simulator
     sheet = simulator.sheet
-    return (f'{simulator.frame} frames ({simulator.time:.1f} s simulated), '
+    counters = simulation.counters()
+    return (f'{simulator.frame} frames ({simulator.time:.1f} s simulated in '
+            f'{wall_seconds:.1f} s: real-time factor {simulator.time / wall_seconds:.2f}; '
+            f'{counters["slipped_frames"]} frames behind the clock, '
+            f'{counters["dropped_frames"]} publications dropped), '
             f'{sheet.vertex_count} vertices, breaks {getattr(simulator, "breaks", 0)}, '
-            f'folds {getattr(simulator, "folds", 0)}, max strain {simulator.max_strain():.3%}, '
+            f'folds {getattr(simulator, "folds", 0)}, max strain {simulator.max_strain():.2%}, '
             f'all finite: {bool(np.isfinite(sheet.positions).all())}')
 
 

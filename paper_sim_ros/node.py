@@ -505,6 +505,21 @@ class PaperSimNode(Node):
         return response
 
     # ----------------------------------------------------------------------- diagnostics
+    def counters(self) -> dict[str, int]:
+        """Totals since start: frames stepped and slipped, publications dropped, poses."""
+        stats = self._stats
+        return {
+            'frames_stepped': stats.frames_stepped,
+            'slipped_frames': stats.slipped_frames,
+            'dropped_frames': self._points_schedule.dropped + self._markers_schedule.dropped,
+            'dropped_points': self._points_schedule.dropped,
+            'dropped_markers': self._markers_schedule.dropped,
+            'poses_received': stats.poses_received,
+            'poses_refused': stats.poses_refused,
+            'resets': stats.resets,
+            'tick_errors': stats.tick_errors,
+        }
+
     def _on_diagnostics(self) -> None:
         stats = self._stats
         simulator = self.simulator
@@ -551,17 +566,9 @@ class PaperSimNode(Node):
             'aux_springs': int(np.count_nonzero(kind == AUX)),
             'breaks': int(getattr(simulator, 'breaks', 0)),
             'folds': int(getattr(simulator, 'folds', 0)),
-            'dropped_frames': dropped,
-            'dropped_points': self._points_schedule.dropped,
-            'dropped_markers': self._markers_schedule.dropped,
-            'slipped_frames': stats.slipped_frames,
-            'frames_stepped': stats.frames_stepped,
-            'poses_received': stats.poses_received,
-            'poses_refused': stats.poses_refused,
+            **self.counters(),
             'active_probes': int(np.count_nonzero(simulator.probes.active)),
-            'resets': stats.resets,
             'nan_rolled_back': bool(simulator.nan_seen),
-            'tick_errors': stats.tick_errors,
             'recording': self._recorder.path if self._recorder is not None else '',
         }
         status = diagnostic_status(DIAGNOSTIC_NAME, self.get_fully_qualified_name(), level,
