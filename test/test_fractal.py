@@ -35,9 +35,15 @@ def test_invalid_parameters_are_refused():
     for amplitude in (-0.001, float('nan'), float('inf')):
         with pytest.raises(ValueError, match='amplitude'):
             build_aged_sheet(A4, amplitude, None, 0)
-    for levels in (-1, 8, 2.5):
+    for levels in (-1, 8, 2.5, True):
         with pytest.raises(ValueError, match='levels'):
             build_aged_sheet(A4, 0.01, levels, 0)
+    for seed in (None, -1, 1.5):
+        with pytest.raises(ValueError, match='seed'):
+            build_aged_sheet(A4, 0.01, None, seed)
+    with pytest.raises(ValueError, match='at least 5'):
+        build_aged_sheet(SheetConfig(nx=3, ny=3), 0.01, None, 0)
+    assert build_aged_sheet(SheetConfig(nx=5, ny=5), 0.01, None, 0).vertex_count == 25
     with pytest.raises(ValueError, match='too steep'):
         build_aged_sheet(A4, 0.2, None, 0)
 

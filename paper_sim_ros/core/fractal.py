@@ -61,17 +61,25 @@ def grid_exponent(vertices_per_side: int) -> int:
 def _check_levels(exponent: int, levels: int | None) -> int:
     if levels is None:
         return exponent + 1
-    if not isinstance(levels, (int, np.integer)) or not 0 <= levels <= exponent + 1:
+    if not isinstance(levels, (int, np.integer)) or isinstance(levels, bool) \
+            or not 0 <= levels <= exponent + 1:
         raise ValueError(f'levels must be None or an integer in [0, {exponent + 1}] '
                          f'(N + 1 = all iterations), got {levels!r}')
     return int(levels)
 
 
 def _check_amplitude(amplitude: float) -> float:
-    if not isinstance(amplitude, (int, float, np.floating)) or not math.isfinite(amplitude) \
-            or amplitude < 0:
+    if not isinstance(amplitude, (int, float, np.floating)) or isinstance(amplitude, bool) \
+            or not math.isfinite(amplitude) or amplitude < 0:
         raise ValueError(f'amplitude must be a finite number >= 0 [m], got {amplitude!r}')
     return float(amplitude)
+
+
+def _check_seed(seed: int) -> int:
+    # numpy would take None as "fresh entropy": refuse it, the surface must be reproducible
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f'seed must be a non-negative integer, got {seed!r}')
+    return int(seed)
 
 
 def bilinear_upsample(lattice: np.ndarray, stride: int) -> np.ndarray:
@@ -107,7 +115,7 @@ def fractal_height_levels(exponent: int, amplitude: float, seed: int,
     Fig. 9 shows "after L iterations". ``levels=None`` runs all N + 1 iterations."""
     amplitude = _check_amplitude(amplitude)
     levels = _check_levels(exponent, levels)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(_check_seed(seed))
     side = (1 << exponent) + 1
     heights = np.zeros((side, side))
     result = [heights.copy()]
@@ -204,6 +212,10 @@ def aged_surface(config: SheetConfig, amplitude: float, levels: int | None,
         raise ValueError(f'the fractal surface needs a square grid (nx == ny == 2^N + 1), '
                          f'got nx={config.nx}, ny={config.ny}')
     exponent = grid_exponent(config.nx)
+    if config.nx < LOWPASS_TAPS.size - 2:
+        raise ValueError(f'the fractal surface needs at least {LOWPASS_TAPS.size - 2} '
+                         f'vertices a side (the low-pass filter is {LOWPASS_TAPS.size} wide), '
+                         f'got {config.nx}')
     heights = lowpass_filter(fractal_heights(exponent, amplitude, seed, levels))
     heights -= heights.min()
     grid = restore_side_lengths(heights, config.width, config.height)
