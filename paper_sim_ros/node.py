@@ -568,6 +568,7 @@ class PaperSimNode(Node):
             'folds': int(getattr(simulator, 'folds', 0)),
             **self.counters(),
             'active_probes': int(np.count_nonzero(simulator.probes.active)),
+            'pinned_vertices': int(np.count_nonzero(sheet.pinned)),
             'nan_rolled_back': bool(simulator.nan_seen),
             'recording': self._recorder.path if self._recorder is not None else '',
         }

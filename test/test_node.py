@@ -299,6 +299,30 @@ def test_invalid_parameter_values_are_refused_with_a_reason(sim):
     assert get_parameter(sim, 'solver.jacobi_iterations') == 12
 
 
+def test_run_time_changes_take_effect(sim):
+    """Dense, noisy cloud sampling and pinning, switched on and off while running."""
+    reset(sim)
+    assert all(result.successful for result in set_parameters(
+        sim, points__dense_samples=3, points__noise_stddev=0.001))
+    sim.spin_for(0.5)
+    cloud = fresh_cloud(sim)
+    triangles = 2 * (GRID - 1) ** 2
+    assert cloud.width >= 3 * triangles, 'the cloud is not the dense sampling'
+    points = parse_cloud(cloud)
+    for name in points.dtype.names:
+        assert np.isfinite(points[name].astype(np.float64)).all(), name
+    assert 0.0005 < float(np.std(points['z'])) < 0.002, 'no sensor-like noise on z'
+    assert all(result.successful for result in set_parameters(
+        sim, points__dense_samples=0, points__noise_stddev=0.0))
+    assert set_parameters(sim, pin_mode='short_edge')[0].successful
+    sim.spin_for(1.2)
+    assert int(diagnostics(sim)['pinned_vertices']) == GRID
+    assert set_parameters(sim, pin_mode='none')[0].successful
+    sim.spin_for(1.2)
+    assert int(diagnostics(sim)['pinned_vertices']) == 0
+    assert fresh_cloud(sim).width == VERTICES
+
+
 def test_reset_during_contact(sim):
     reset(sim)
     press_for(sim, 1.0)

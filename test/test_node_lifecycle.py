@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import PointCloud2
 
 from ros_harness import (CONFIG, PYTHON, RosClient, cloud_positions, new_domain_id, overrides,
@@ -78,6 +79,44 @@ def test_an_inconsistent_parameter_set_is_a_clear_startup_error(tmp_path):
     assert result.returncode == 1, result.stderr[-2000:]
     assert 'one radius per probe topic' in result.stderr
     assert 'Traceback' not in result.stderr
+
+
+def test_falling_behind_is_graceful_and_reported(tmp_path):
+    """A physics rate the machine cannot follow: frames stay dt apart (the stamps say so),
+    the simulation slips behind the clock, outputs keep coming, diagnostics tell."""
+    domain = new_domain_id()
+    process = start_node(tmp_path, {'sheet.nx': 33, 'sheet.ny': 33, 'physics_rate': 1000.0,
+                                    'publish_rate': 200.0, 'markers_rate': 50.0,
+                                    'max_catchup_frames': 2, 'diagnostics_rate': 2.0},
+                         domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        client.subscribe(DiagnosticArray, '/diagnostics')
+        wait_for_cloud(client, process)
+        since = time.monotonic()
+        client.spin_for(3.0)
+        clouds = client.messages('paper/points', since)
+        assert len(clouds) >= 10, f'only {len(clouds)} clouds while behind'
+        stamps = np.array([c.header.stamp.sec * 10**9 + c.header.stamp.nanosec
+                           for c in clouds], dtype=np.int64)
+        steps = np.diff(stamps) / 1e6  # in frames of 1 ms
+        np.testing.assert_allclose(steps, np.round(steps), atol=1e-3,
+                                   err_msg='published states are not whole frames apart')
+        assert np.all(steps >= 1)
+        reports = client.messages('/diagnostics', since)
+        assert reports
+        values = {pair.key: pair.value for pair in reports[-1].status[0].values}
+        assert float(values['real_time_factor']) < 0.95, values
+        assert int(values['slipped_frames']) > 0, values
+        assert reports[-1].status[0].level == DiagnosticStatus.WARN
+        assert 'behind real time' in reports[-1].status[0].message
+        assert int(values['frames_stepped']) == int(values['frame'])
+        assert float(values['sim_time']) == pytest.approx(int(values['frame']) * 1e-3, abs=1e-6)
+    finally:
+        client.close()
+        code = process.stop()
+    assert code == 0, process.output()[-3000:]
 
 
 def test_use_sim_time_follows_clock(tmp_path):
