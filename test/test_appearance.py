@@ -269,6 +269,16 @@ def test_any_vertex_count_and_texture_coordinates_follow_the_material():
     np.testing.assert_array_equal(appearance.vertex_colors(moved), colors)
 
 
+def test_an_appearance_built_on_a_damaged_sheet_still_uses_level_normals():
+    sheet = build_aged_sheet(SMALL, 0.01, None, seed=6)
+    grown = split_edge(sheet, 16 * 33 + 16, 16 * 33 + 17)
+    late = PaperAppearance(AppearanceConfig(), grown)
+    early = PaperAppearance(AppearanceConfig(), sheet)
+    assert late.uses_level_normals
+    np.testing.assert_allclose(late.shading_normals(grown)[:-1], early.shading_normals(grown)[:-1],
+                               atol=1e-9)
+
+
 def test_sheets_that_are_not_fractal_grids_use_full_detail_normals():
     for config in (SheetConfig(nx=20, ny=30), SheetConfig(nx=33, ny=17)):
         sheet = build_flat_sheet(config)

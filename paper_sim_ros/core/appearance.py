@@ -20,6 +20,8 @@ The tilt removes the fine relief of the rest shape from the light; where the she
 lost that relief (pressed flat), removing it again would paint the relief in reverse, so
 the tilt is scaled by how much of the relief is still there (``detail_presence``: 1 at
 rest and under rigid motion, 0 when flat).
+A sheet given after damage works too: its first n² vertices are still the grid (damage
+appends the vertices it inserts), and their current shape is taken as the rest shape.
 On sheets that are not such a grid (or with ``normal_level`` above N), the current
 full-detail normals shade.
 
@@ -351,19 +353,19 @@ def local_frames(positions: np.ndarray, material: np.ndarray,
 
 
 def _grid_side(sheet: Sheet) -> int | None:
-    """n if the sheet is an n × n grid (n = 2^N + 1) in ``grid_material`` order, else None."""
-    side = int(round(math.sqrt(sheet.vertex_count)))
-    if side * side != sheet.vertex_count:
-        return None
-    try:
-        grid_exponent(side)
-    except ValueError:
-        return None
-    gx, gy = np.meshgrid(np.linspace(-sheet.width / 2, sheet.width / 2, side),
-                         np.linspace(-sheet.height / 2, sheet.height / 2, side))
-    expected = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    """n if the sheet's first n² vertices are an n × n grid (n = 2^N + 1) in
+    ``grid_material`` order (vertices that damage inserted follow them), else None."""
     tolerance = 1e-9 * max(sheet.width, sheet.height)
-    return side if np.allclose(sheet.material, expected, rtol=0.0, atol=tolerance) else None
+    for exponent in range(10, 0, -1):
+        side = (1 << exponent) + 1
+        if side * side > sheet.vertex_count:
+            continue
+        gx, gy = np.meshgrid(np.linspace(-sheet.width / 2, sheet.width / 2, side),
+                             np.linspace(-sheet.height / 2, sheet.height / 2, side))
+        expected = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        if np.allclose(sheet.material[:side * side], expected, rtol=0.0, atol=tolerance):
+            return side
+    return None
 
 
 def catmull_rom_weights(cells: int, stride: int) -> np.ndarray:
@@ -448,12 +450,13 @@ class PaperAppearance:
         side = _grid_side(sheet)
         if side is None or self.config.normal_level > grid_exponent(side):
             return None
-        grid = np.nan_to_num(sheet.positions).reshape(side, side, 3)
+        count = side * side
+        grid = np.nan_to_num(sheet.positions[:count]).reshape(side, side, 3)
+        material = sheet.material[:count]
         coarse = level_surface(grid, self.config.normal_level).reshape(-1, 3)
         triangles = grid_triangles(side, side)
-        _, _, level_normal = local_frames(coarse, sheet.material, triangles)
-        tangent, bitangent, normal = local_frames(grid.reshape(-1, 3), sheet.material,
-                                                  triangles)
+        _, _, level_normal = local_frames(coarse, material, triangles)
+        tangent, bitangent, normal = local_frames(grid.reshape(-1, 3), material, triangles)
         tilt = np.stack([np.sum(level_normal * frame, axis=1)
                          for frame in (tangent, bitangent, normal)]
                         + [normal_detail(grid.reshape(-1, 3), triangles, normal)], axis=1)
