@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig, from_mapping
+from .config import (ContactConfig, DamageConfig, SheetConfig, SimulationConfig, SolverConfig,
+                     from_mapping)
 from .sheet import Sheet
 
 PIN_MODES = ('none', 'short_edge')
@@ -50,6 +51,30 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
             'keyframes': [[0.0, 0.0, 0.0, 0.05], [1.0, 0.0, 0.0, 0.009],
                           [1.5, 0.0, 0.0, 0.009], [2.5, 0.0, 0.0, 0.05]],
         }],
+    },
+    # two fingertips press 3 mm into the (yielding) table just beyond the short edges and
+    # push them towards each other by 30 % of the length (2 × 44.55 mm) in 2 s, then lift.
+    # (They push the edges rather than drag the sheet from on top: the contact model's
+    # friction grows with the sub-step's penetration, which is too small to grip paper.)
+    'squeeze': {
+        'description': 'A4 sheet flat on a table; two 1.5 cm probes press down at its short '
+                       'edges and push them towards each other by 30 % of its length in 2 s '
+                       '(the sheet buckles between them), then lift off.',
+        'duration': 4.0,
+        'contact': {'ground_enabled': True},
+        'probes': [{
+            'name': f'finger_{side}',
+            'radius': 0.015,
+            'keyframes': [[0.0, 0.0, sign * 0.165, 0.05], [0.5, 0.0, sign * 0.165, -0.003],
+                          [2.5, 0.0, sign * 0.12045, -0.003], [3.0, 0.0, sign * 0.12045, 0.05]],
+        } for side, sign in (('low', -1.0), ('high', 1.0))],
+    },
+    'crumple': {
+        'description': 'Random damage (breaks and folds, paper Fig. 8) on a flat sheet, '
+                       'then free relaxation without gravity.',
+        'duration': 3.0,
+        'crumple': 300,
+        'solver': {'gravity': [0.0, 0.0, 0.0], 'air_damping': 3.0},
     },
 }
 
@@ -81,6 +106,8 @@ class Scenario:
     probes: tuple[ProbeTrack, ...]
     mapping: dict
     """The mapping this scenario was built from (recorded so a session can be re-run)."""
+    crumple: int = 0
+    """Random damage events (SPEC §4.3) applied to the sheet before the first frame."""
 
     @property
     def frame_count(self) -> int:
@@ -125,7 +152,7 @@ def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
     if not isinstance(mapping, dict):
         raise ValueError('a scenario must be a mapping')
     known = {'name', 'description', 'duration', 'seed', 'pin', 'sheet', 'solver', 'contact',
-             'probes'}
+             'probes', 'damage', 'crumple'}
     unknown = sorted(set(mapping) - known)
     if unknown:
         raise ValueError(f'unknown scenario keys: {", ".join(unknown)}')
@@ -140,12 +167,16 @@ def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
         solver=from_mapping(SolverConfig, mapping.get('solver') or {}),
         contact=from_mapping(ContactConfig, mapping.get('contact') or {}),
         seed=int(mapping.get('seed', 0)),
+        damage=from_mapping(DamageConfig, mapping.get('damage') or {}),
     )
+    crumple = mapping.get('crumple', 0)
+    if not (isinstance(crumple, int) and 0 <= crumple <= 1_000_000):
+        raise ValueError(f'crumple must be an integer in [0, 1000000], got {crumple!r}')
     probes = tuple(_probe_from_mapping(p) for p in mapping.get('probes') or [])
     return Scenario(name=str(mapping.get('name', name)),
                     description=str(mapping.get('description', '')),
                     duration=duration, pin=pin, config=config, probes=probes,
-                    mapping=copy.deepcopy(mapping))
+                    mapping=copy.deepcopy(mapping), crumple=crumple)
 
 
 def builtin_mapping(name: str) -> dict:

@@ -60,13 +60,18 @@ def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 def check_mesh(triangles: np.ndarray, vertex_count: int, positions: np.ndarray,
-               spring_vertices: np.ndarray, min_area: float = 1e-14) -> list[str]:
+               spring_vertices: np.ndarray, min_area: float = 1e-14,
+               spring_kind: np.ndarray | None = None) -> list[str]:
     """Every SPEC §4.4 invariant that fails, as readable sentences (empty list: valid).
 
-    Checks: indices in range, no repeated corner, every edge in at most two triangles,
-    consistent orientation (each interior edge traversed once in each direction),
-    every triangle edge is a spring, no degenerate (near-zero-area) triangle, every
-    vertex used by a triangle.
+    Checks: indices in range, no repeated corner, every edge in at most two triangles
+    (edge-manifold), the triangles around every vertex form one fan (vertex-manifold),
+    consistent orientation (each interior edge traversed once in each direction), the two
+    triangles of an interior edge have different opposite vertices, every triangle edge is
+    a spring, no degenerate (near-zero-area) triangle, every vertex used by a triangle.
+    With ``spring_kind`` (HINGE 0, BEND 1, AUX 2) also: the HINGE springs are exactly the
+    triangle edges, once each, and every BEND spring joins the two opposite vertices of an
+    interior edge (the adjacency it was built from).
     """
     problems: list[str] = []
     if triangles.size == 0:
@@ -81,15 +86,23 @@ def check_mesh(triangles: np.ndarray, vertex_count: int, positions: np.ndarray,
     if np.unique(directed).size != directed.size:
         problems.append('inconsistent orientation: a directed edge appears twice')
     try:
-        edges, _ = mesh_edges(triangles, vertex_count)
+        edges, opposite = mesh_edges(triangles, vertex_count)
     except ValueError as error:
         problems.append(str(error))
         edges = np.empty((0, 2), dtype=np.int32)
+        opposite = np.empty((0, 2), dtype=np.int32)
+    interior = opposite[:, 1] != NO_VERTEX
+    if np.any(opposite[interior, 0] == opposite[interior, 1]):
+        problems.append('an interior edge has the same opposite vertex on both sides')
+    problems += _vertex_fan_problems(triangles, vertex_count, edges, interior)
     spring_keys = np.unique(edge_key(spring_vertices[:, 0], spring_vertices[:, 1], vertex_count))
     triangle_edge_keys = edge_key(edges[:, 0], edges[:, 1], vertex_count)
     missing = ~np.isin(triangle_edge_keys, spring_keys)
     if np.any(missing):
         problems.append(f'{int(missing.sum())} triangle edges have no spring')
+    if spring_kind is not None:
+        problems += _spring_adjacency_problems(spring_vertices, spring_kind, vertex_count,
+                                               edges, opposite, triangle_edge_keys)
     corner = positions[triangles]
     area = 0.5 * np.linalg.norm(
         np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]), axis=1)
@@ -99,4 +112,42 @@ def check_mesh(triangles: np.ndarray, vertex_count: int, positions: np.ndarray,
     used[triangles.ravel()] = True
     if not used.all():
         problems.append(f'{int((~used).sum())} vertices belong to no triangle')
+    return problems
+
+
+def _vertex_fan_problems(triangles: np.ndarray, vertex_count: int, edges: np.ndarray,
+                         interior: np.ndarray) -> list[str]:
+    """A vertex is manifold when its triangles form one fan: a closed one (no border
+    edges, as many triangles as edges) or an open one (two border edges, one triangle
+    fewer than edges). Two fans meeting at a vertex (a bow tie) break the count."""
+    triangle_count = np.bincount(triangles.ravel(), minlength=vertex_count)
+    edge_count = np.bincount(edges.ravel(), minlength=vertex_count)
+    border = edges[~interior]
+    border_count = np.bincount(border.ravel(), minlength=vertex_count)
+    closed = (border_count == 0) & (triangle_count == edge_count)
+    open_fan = (border_count == 2) & (triangle_count == edge_count - 1)
+    bad = triangle_count > 0
+    bad &= ~(closed | open_fan)
+    if np.any(bad):
+        return [f'{int(bad.sum())} non-manifold vertices (not a single fan of triangles)']
+    return []
+
+
+def _spring_adjacency_problems(spring_vertices: np.ndarray, spring_kind: np.ndarray,
+                               vertex_count: int, edges: np.ndarray, opposite: np.ndarray,
+                               triangle_edge_keys: np.ndarray) -> list[str]:
+    problems = []
+    hinge = spring_vertices[spring_kind == 0]
+    hinge_keys = edge_key(hinge[:, 0], hinge[:, 1], vertex_count)
+    if np.unique(hinge_keys).size != hinge_keys.size:
+        problems.append('two HINGE springs share an edge')
+    if np.any(~np.isin(hinge_keys, triangle_edge_keys)):
+        problems.append('a HINGE spring is not a triangle edge')
+    if np.any(~np.isin(triangle_edge_keys, hinge_keys)):
+        problems.append('a triangle edge has no HINGE spring')
+    bend = spring_vertices[spring_kind == 1]
+    interior = opposite[:, 1] != NO_VERTEX
+    across_keys = edge_key(opposite[interior, 0], opposite[interior, 1], vertex_count)
+    if np.any(~np.isin(edge_key(bend[:, 0], bend[:, 1], vertex_count), across_keys)):
+        problems.append('a BEND spring does not span an interior edge')
     return problems
