@@ -220,10 +220,10 @@ def project_attachments(positions, attached_vertex, anchor_vertex, attachment_le
 
 @njit(cache=True)
 def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center_motion,
-                        radius, friction, apply_friction):
+                        radius, friction, apply_friction, touched):
     """Move vertices inside a sphere to its surface; with ``apply_friction``, cancel (static)
     or shorten (kinetic, Coulomb: by friction × depth) their tangential slip relative to
-    the sphere's own motion over the step."""
+    the sphere's own motion over the step. Marks the vertices it moved in ``touched``."""
     for v in range(positions.shape[0]):
         if inverse_mass[v] == 0.0:
             continue
@@ -239,6 +239,7 @@ def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center
         else:
             nx, ny, nz = dx / distance, dy / distance, dz / distance
         depth = radius - distance
+        touched[v] = True
         positions[v, 0] += depth * nx
         positions[v, 1] += depth * ny
         positions[v, 2] += depth * nz
@@ -279,11 +280,12 @@ def project_ground(positions, start_positions, inverse_mass, ground_height, fric
 
 @njit(cache=True)
 def project_probes(positions, start_positions, inverse_mass, probe_start, probe_end,
-                   probe_radius, probe_active, friction, sweep):
+                   probe_radius, probe_active, friction, sweep, touched):
     """Push vertices out of every active probe. With ``sweep`` the probe is swept from its
     start to its end centre in moves of at most a quarter radius, so that a probe faster
     than one radius per step pushes the sheet along instead of tunnelling through it;
-    friction acts on the final position only."""
+    friction acts on the final position only. ``touched`` (V,) bool marks every vertex a
+    probe moved."""
     motion = np.empty(3)
     center = np.empty(3)
     for p in range(probe_radius.shape[0]):
@@ -301,7 +303,7 @@ def project_probes(positions, start_positions, inverse_mass, probe_start, probe_
             for k in range(3):
                 center[k] = probe_start[p, k] + fraction * motion[k]
             _push_out_of_sphere(positions, start_positions, inverse_mass, center, motion,
-                                radius, friction, sweep and m == moves)
+                                radius, friction, sweep and m == moves, touched)
 
 
 @njit(cache=True)

@@ -90,8 +90,10 @@ class Simulator:
         if not (len(centers) == len(radii) == len(active)):
             raise ValueError('centers, radii and active must have the same length')
         limit = self.config.contact.max_probe_distance
-        usable = active & np.all(np.isfinite(centers), axis=1) \
-            & (np.linalg.norm(np.nan_to_num(centers), axis=1) <= limit)
+        finite = np.all(np.isfinite(centers), axis=1)
+        distance = np.full(len(centers), np.inf)
+        distance[finite] = np.linalg.norm(centers[finite], axis=1)
+        usable = active & (distance <= limit)
         if np.any(active & ~usable):
             raise ValueError(f'probe centre not finite or farther than {limit} m from origin')
         if np.any(~np.isfinite(radii)) or np.any(radii <= 0):
@@ -191,11 +193,16 @@ class Simulator:
             self._force_step(h)
 
         # contact (swept probes, then the table), with friction
-        self._contact(positions, start_positions, probe_from, probe_to, True)
+        touched = np.zeros(sheet.vertex_count, dtype=bool)
+        self._contact(positions, start_positions, probe_from, probe_to, True, touched)
 
-        # stretch: strain limiting, attachments, and contact kept satisfied alongside
+        # stretch: strain limiting, attachments, and contact kept satisfied alongside.
+        # A probe is kinematic: what it touches moves with it and the sheet follows, so a
+        # fast probe drags the sheet along instead of the sheet pulling its patch back
+        # through the probe
         if self._constraint_springs.size:
-            self._limit_strain(positions, start_positions, probe_from, probe_to)
+            inverse_mass = np.where(touched, 0.0, self._inverse_mass)
+            self._limit_strain(positions, start_positions, probe_from, probe_to, inverse_mass)
 
         # velocities from the positions actually reached
         velocities[:] = (positions - start_positions) / h
@@ -255,7 +262,8 @@ class Simulator:
                           shortest, longest, rhs)
             self._global_step.solve(rhs, positions)
 
-    def _limit_strain(self, positions, start_positions, probe_from, probe_to) -> None:
+    def _limit_strain(self, positions, start_positions, probe_from, probe_to,
+                      inverse_mass) -> None:
         solver = self.config.solver
         ends = self.sheet.spring_vertices[self._constraint_springs]
         rest = self.sheet.spring_rest_length[self._constraint_springs]
@@ -263,7 +271,7 @@ class Simulator:
         longest = 1.0 + solver.max_stretch
         for _ in range(solver.constraint_iterations):
             for reverse in (False, True):
-                kernels.project_springs(positions, self._inverse_mass, ends, rest,
+                kernels.project_springs(positions, inverse_mass, ends, rest,
                                         shortest, longest, reverse)
             kernels.project_attachments(positions, self._attached, self._anchor,
                                         self._attachment_length)
@@ -273,10 +281,11 @@ class Simulator:
         near = self._near_pin_count
         for _ in range(NEAR_PIN_SWEEPS if near else 0):
             for reverse in (False, True):
-                kernels.project_springs(positions, self._inverse_mass, ends[:near],
+                kernels.project_springs(positions, inverse_mass, ends[:near],
                                         rest[:near], shortest, longest, reverse)
 
-    def _contact(self, positions, start_positions, probe_from, probe_to, with_friction):
+    def _contact(self, positions, start_positions, probe_from, probe_to, with_friction,
+                 touched=None):
         contact = self.config.contact
         # the table first, so that a probe pressed into it has the last word: the table
         # yields under a probe like a desk mat, and the sheet dimples into it
@@ -287,7 +296,9 @@ class Simulator:
         if self.probes.count:
             kernels.project_probes(positions, start_positions, self._inverse_mass,
                                    probe_from, probe_to, self.probes.radius,
-                                   self.probes.active, contact.probe_friction, with_friction)
+                                   self.probes.active, contact.probe_friction, with_friction,
+                                   touched if touched is not None
+                                   else np.zeros(positions.shape[0], dtype=bool))
 
     # ------------------------------------------------------------------------- damage
     def crumple(self, count: int, seed: int) -> None:
