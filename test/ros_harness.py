@@ -1,13 +1,13 @@
 """Helpers for tests that run the node as its own process and talk to it over real DDS.
 
-Isolation: each pytest process gets its own block of ROS domain ids (derived from its pid)
-and every node process and test context in it uses a fresh id from that block; discovery is
-limited to this machine. Importing this module fails (it never skips) when rclpy is missing.
+Isolation: every node process and test context uses a fresh ROS domain id, drawn at random
+from a generator seeded by the pid; discovery is limited to this machine. Importing this
+module fails (it never skips) when rclpy is missing.
 """
 from __future__ import annotations
 
-import itertools
 import os
+import random
 from pathlib import Path
 import signal
 import subprocess
@@ -24,19 +24,25 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / 'config' / 'paper_sim.yaml'
 PYTHON = sys.executable
 
-_DOMAIN_BLOCK = 5
-_DOMAIN_BASE = 10 + (os.getpid() % 44) * _DOMAIN_BLOCK
-"""Domain ids 10..229: a block of five per test process, never above 232 (Fast DDS ports)."""
-_domain_counter = itertools.count()
+_domain_random = random.Random(os.getpid() * 1_000_003 + time.time_ns())
+_PROCESS_DOMAIN = _domain_random.randint(1, 232)
+"""This test process's ROS domain; nodes it starts get fresh ones (1..232: Fast DDS ports)."""
+_used_domains = {_PROCESS_DOMAIN}
 
 ISOLATION = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_LOCALHOST_ONLY': '1'}
 os.environ.update(ISOLATION)
-os.environ['ROS_DOMAIN_ID'] = str(_DOMAIN_BASE)
+os.environ['ROS_DOMAIN_ID'] = str(_PROCESS_DOMAIN)
 
 
 def new_domain_id() -> int:
-    """A domain id no other test process uses (and not the previous few of this one)."""
-    return _DOMAIN_BASE + next(_domain_counter) % _DOMAIN_BLOCK
+    """A domain id this test process has not used yet, drawn at random (seeded by the pid and
+    the time), so that concurrent test processes practically never meet; ``RosClient``
+    checks that the node it talks to is alone on it."""
+    while True:
+        domain = _domain_random.randint(1, 232)
+        if domain not in _used_domains:
+            _used_domains.add(domain)
+            return domain
 
 
 def ros_env(domain_id: int, extra: dict | None = None) -> dict:
@@ -112,6 +118,7 @@ class RosClient:
     arrives on the topics it subscribes to."""
 
     def __init__(self, domain_id: int, name: str = 'paper_sim_test') -> None:
+        self.domain_id = domain_id
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id,
                    signal_handler_options=SignalHandlerOptions.NO)
@@ -142,6 +149,12 @@ class RosClient:
             self.executor.spin_once(timeout_sec=0.01)
             if every is not None:
                 every()
+
+    def assert_alone(self, topic: str = 'paper/points') -> None:
+        """Exactly one publisher of ``topic`` on this domain: no stray node from elsewhere."""
+        count = self.node.count_publishers(topic)
+        assert count == 1, f'{count} publishers of {topic} on domain {self.domain_id}: ' \
+            'another process shares this ROS domain'
 
     def spin_until(self, predicate: Callable[[], bool], timeout: float,
                    what: str = 'condition', process: NodeProcess | None = None) -> None:

@@ -47,6 +47,8 @@ def sim(tmp_path_factory):
     try:
         client.spin_until(lambda: client.latest('paper/points') is not None, 60,
                           'the first point cloud', process)
+        client.spin_for(0.5)
+        client.assert_alone()
         yield client
     finally:
         client.close()
@@ -300,7 +302,8 @@ def test_invalid_parameter_values_are_refused_with_a_reason(sim):
 
 
 def test_run_time_changes_take_effect(sim):
-    """Dense, noisy cloud sampling and pinning, switched on and off while running."""
+    """Dense, noisy cloud sampling, pinning, sub-steps and the table, changed while
+    running."""
     reset(sim)
     assert all(result.successful for result in set_parameters(
         sim, points__dense_samples=3, points__noise_stddev=0.001))
@@ -321,6 +324,17 @@ def test_run_time_changes_take_effect(sim):
     sim.spin_for(1.2)
     assert int(diagnostics(sim)['pinned_vertices']) == 0
     assert fresh_cloud(sim).width == VERTICES
+    # the solver's sub-steps and the table height, while running
+    assert all(result.successful for result in set_parameters(
+        sim, solver__substeps=2, contact__ground_height=0.01))
+    sim.spin_for(1.5)
+    raised = cloud_positions(fresh_cloud(sim))
+    assert raised[:, 2].min() > 0.0095, 'the sheet did not follow the raised table'
+    assert get_parameter(sim, 'solver.substeps') == 2
+    assert all(result.successful for result in set_parameters(
+        sim, solver__substeps=1, contact__ground_height=0.0))
+    sim.spin_for(1.0)
+    assert np.isfinite(cloud_positions(fresh_cloud(sim))).all()
 
 
 def test_reset_during_contact(sim):
