@@ -18,14 +18,18 @@ from typing import Callable
 import yaml
 
 from .core import kernels
+from .core.damage import damage_metrics
 from .core.scenarios import (BUILTIN_SCENARIOS, Scenario, builtin_mapping,
                              scenario_from_mapping, with_overrides)
 from .core.simulator import Simulator
+from .warmup import warm_up
 
 
 def build_simulator(scenario: Scenario) -> Simulator:
     simulator = Simulator(scenario.config)
     simulator.set_pinned(scenario.pinned_mask(simulator.sheet))
+    if scenario.crumple and scenario.config.damage.enabled:
+        simulator.crumple(scenario.crumple, scenario.config.seed)
     return simulator
 
 
@@ -70,6 +74,7 @@ def run_scenario(scenario: Scenario,
         'nan': bool(nan_seen),
         'total_mass': sheet.total_mass,
         'final_positions_sha256': sheet.positions_sha256(),
+        **damage_metrics(simulator),
     }
 
 
@@ -102,6 +107,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--seed', type=int, help='random seed')
     parser.add_argument('--solver', choices=('constrained', 'paper', 'explicit'),
                         help='time stepping method (default constrained)')
+    parser.add_argument('--no-damage', action='store_true',
+                        help='switch breaks and folds off (the sheet behaves like rubber)')
     parser.add_argument('--metrics-json', help='write the metrics to this JSON file')
     parser.add_argument('--rrd', help='record the run to this Rerun .rrd file')
     parser.add_argument('--replay', metavar='FILE.rrd',
@@ -135,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
         mapping = with_overrides(load_scenario_mapping(args.scenario), grid=args.grid,
                                  duration=args.duration, dt=args.dt, substeps=args.substeps,
                                  seed=args.seed, method=args.solver)
+        if args.no_damage:
+            mapping['damage'] = {**(mapping.get('damage') or {}), 'enabled': False}
         scenario = scenario_from_mapping(mapping)
         if args.metrics_json:
             directory = os.path.dirname(os.path.abspath(args.metrics_json))
@@ -151,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     try:
+        warm_up()
         metrics = run_scenario(scenario, on_frame=on_frame)
     except KeyboardInterrupt:
         print('paper_sim_headless: interrupted', file=sys.stderr)
