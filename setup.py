@@ -22,7 +22,6 @@ setup(
     maintainer_email='dev@paper-sim-ros.invalid',
     description='Interactive simulation of folded paper for ROS 2 robot stacks.',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'paper_sim_headless = paper_sim_ros.headless:main',

@@ -30,7 +30,7 @@ from .sheet import AUX, HINGE, Sheet, build_flat_sheet
 
 NEAR_PIN_LEVELS = 10
 """Springs within this many hops of a pinned vertex get extra strain-limiting sweeps."""
-NEAR_PIN_SWEEPS = 4
+NEAR_PIN_SWEEPS = 8
 
 
 @dataclass
