@@ -5,7 +5,7 @@ import pytest
 
 from paper_sim_ros.core.appearance import (
     FULL_DETAIL_LEVEL, MAX_TEXTURE_SIDE, AppearanceConfig, PaperAppearance, catmull_rom_weights,
-    level_surface, local_frames, procedural_paper_texture, sample_texture)
+    level_surface, local_frames, normal_detail, procedural_paper_texture, sample_texture)
 from paper_sim_ros.core.config import SheetConfig
 from paper_sim_ros.core.fractal import build_aged_sheet
 from paper_sim_ros.core.sheet import Sheet, build_flat_sheet
@@ -226,6 +226,20 @@ def test_shading_follows_a_fold():
     np.testing.assert_allclose(after[inner], before[inner] @ rotation.T, atol=0.02)
     left = sheet.material[:, 0] < 0.0
     np.testing.assert_allclose(after[left], before[left], atol=1e-9)
+
+
+def test_normal_detail_is_the_relief_along_the_normal():
+    sheet = build_flat_sheet(SMALL)
+    turned = sheet.positions @ rotation_matrix((1, 1, 0), 0.7).T + 0.3
+    np.testing.assert_allclose(normal_detail(turned, sheet.material, sheet.triangles), 0.0,
+                               atol=1e-15)
+    bumped = sheet.positions.copy()
+    centre = 16 * 33 + 16
+    bumped[centre, 2] += 1e-4
+    detail = normal_detail(bumped, sheet.material, sheet.triangles)
+    assert detail[centre] == pytest.approx(1e-4, rel=1e-3)
+    bumped[5, 2] = np.nan
+    assert np.all(np.isfinite(normal_detail(bumped, sheet.material, sheet.triangles)))
 
 
 def test_a_sheet_pressed_flat_is_shaded_flat_not_with_its_relief_reversed():

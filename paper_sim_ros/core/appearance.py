@@ -186,8 +186,11 @@ def load_texture_image(path: str) -> np.ndarray:
 # ------------------------------------------------------------------------------ kernels
 @njit(cache=True)
 def _frames_kernel(positions: np.ndarray, material: np.ndarray, triangles: np.ndarray,
-                   tangent: np.ndarray, bitangent: np.ndarray, normal: np.ndarray) -> None:
-    """Fills the per-vertex frames of ``local_frames`` (outputs zeroed by the caller)."""
+                   tangent: np.ndarray, bitangent: np.ndarray, normal: np.ndarray,
+                   neighbours: np.ndarray, detail: np.ndarray) -> None:
+    """Fills the per-vertex frames of ``local_frames`` and the relief of ``normal_detail``
+    (``tangent``, ``normal`` and ``neighbours`` (V, 4: sum of neighbour positions, count)
+    zeroed by the caller): one pass over the triangles, one over the vertices."""
     for t in range(triangles.shape[0]):
         i, j, k = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         e1x = positions[j, 0] - positions[i, 0]
@@ -215,6 +218,11 @@ def _frames_kernel(positions: np.ndarray, material: np.ndarray, triangles: np.nd
             tangent[v, 0] += ux
             tangent[v, 1] += uy
             tangent[v, 2] += uz
+            # the other two corners are neighbours of v: all three, minus v
+            for axis in range(3):
+                neighbours[v, axis] += positions[i, axis] + positions[j, axis] \
+                    + positions[k, axis] - positions[v, axis]
+            neighbours[v, 3] += 2.0
     for v in range(positions.shape[0]):
         nx, ny, nz = normal[v, 0], normal[v, 1], normal[v, 2]
         length = math.sqrt(nx * nx + ny * ny + nz * nz)
@@ -238,6 +246,12 @@ def _frames_kernel(positions: np.ndarray, material: np.ndarray, triangles: np.nd
         bitangent[v, 0] = ny * tz - nz * ty
         bitangent[v, 1] = nz * tx - nx * tz
         bitangent[v, 2] = nx * ty - ny * tx
+        relief = 0.0
+        if neighbours[v, 3] > 0.0:
+            for axis in range(3):
+                relief += (positions[v, axis] - neighbours[v, axis] / neighbours[v, 3]) \
+                    * normal[v, axis]
+        detail[v] = relief if abs(relief) < math.inf else 0.0  # NaN and ±inf: no relief
 
 
 @njit(cache=True)
@@ -261,18 +275,15 @@ def _bilinear_kernel(grid: np.ndarray, x: np.ndarray, y: np.ndarray, out: np.nda
 
 
 @njit(cache=True)
-def _apply_tilt_kernel(tilt_grid: np.ndarray, x: np.ndarray, y: np.ndarray, presence: float,
-                       tangent: np.ndarray, bitangent: np.ndarray, normal: np.ndarray,
-                       out: np.ndarray) -> None:
-    """out[v] = the tilt (channels 0–2 of the grid) looked up bilinearly at grid column x[v],
-    row y[v], its tangential part scaled by ``presence``, expressed in the frame (tangent,
-    bitangent, normal) of vertex v and normalised (the plain normal where degenerate)."""
-    tilt = np.empty((1, tilt_grid.shape[2]))
-    for v in range(x.shape[0]):
-        _bilinear_kernel(tilt_grid, x[v:v + 1], y[v:v + 1], tilt)
-        a, b = presence * tilt[0, 0], presence * tilt[0, 1]
+def _apply_tilt_kernel(tilt: np.ndarray, presence: float, tangent: np.ndarray,
+                       bitangent: np.ndarray, normal: np.ndarray, out: np.ndarray) -> None:
+    """out[v] = the tilt of vertex v (columns 0–2: components along its tangent, bitangent
+    and normal), its tangential part scaled by ``presence``, in the vertex's current frame,
+    normalised (the plain normal where degenerate)."""
+    for v in range(tilt.shape[0]):
+        a, b = presence * tilt[v, 0], presence * tilt[v, 1]
         c = math.sqrt(max(0.0, 1.0 - a * a - b * b))
-        if tilt[0, 2] < 0.0:
+        if tilt[v, 2] < 0.0:
             c = -c
         ox = a * tangent[v, 0] + b * bitangent[v, 0] + c * normal[v, 0]
         oy = a * tangent[v, 1] + b * bitangent[v, 1] + c * normal[v, 1]
@@ -285,37 +296,18 @@ def _apply_tilt_kernel(tilt_grid: np.ndarray, x: np.ndarray, y: np.ndarray, pres
 
 
 @njit(cache=True)
-def _detail_kernel(positions: np.ndarray, triangles: np.ndarray, normal: np.ndarray,
-                   total: np.ndarray, count: np.ndarray, out: np.ndarray) -> None:
-    """out[v] = (x_v − mean of its triangle neighbours)·n_v (``total``, ``count`` zeroed
-    scratch): the finest-scale relief along the normal (umbrella operator)."""
-    for t in range(triangles.shape[0]):
-        for corner in range(3):
-            v = triangles[t, corner]
-            for other in (triangles[t, (corner + 1) % 3], triangles[t, (corner + 2) % 3]):
-                total[v, 0] += positions[other, 0]
-                total[v, 1] += positions[other, 1]
-                total[v, 2] += positions[other, 2]
-                count[v] += 1.0
-    for v in range(positions.shape[0]):
-        value = 0.0
-        if count[v] > 0.0:
-            for k in range(3):
-                value += (positions[v, k] - total[v, k] / count[v]) * normal[v, k]
-        out[v] = value if abs(value) < math.inf else 0.0  # NaN and ±inf: no relief
-
-
-def normal_detail(positions: np.ndarray, triangles: np.ndarray,
-                  normal: np.ndarray) -> np.ndarray:
-    """(V,) [m]: each vertex's offset along its normal from the mean of its neighbours —
-    the finest relief of the surface (0 on a plane; a smooth bend adds only κ·cell²)."""
-    vertex_count = positions.shape[0]
-    out = np.empty(vertex_count)
-    _detail_kernel(np.ascontiguousarray(positions, dtype=np.float64),
-                   np.ascontiguousarray(triangles, dtype=np.int64),
-                   np.ascontiguousarray(normal, dtype=np.float64),
-                   np.zeros((vertex_count, 3)), np.zeros(vertex_count), out)
-    return out
+def _colour_kernel(image: np.ndarray, columns: np.ndarray, rows: np.ndarray,
+                   light: np.ndarray, blend: float, ambient: float, out: np.ndarray) -> None:
+    """out[v] = light[v] × (blend·texel + 1 − blend) × 255, the texel bilinear at
+    (columns[v], rows[v]), rounded and clamped to uint8; a non-finite light counts as
+    ``ambient``."""
+    texel = np.empty((1, 3))
+    for v in range(light.shape[0]):
+        _bilinear_kernel(image, columns[v:v + 1], rows[v:v + 1], texel)
+        brightness = light[v] if abs(light[v]) < math.inf else ambient
+        for channel in range(3):
+            value = brightness * (blend * texel[0, channel] + (1.0 - blend) * 255.0)
+            out[v, channel] = np.uint8(min(max(value + 0.5, 0.0), 255.0))
 
 
 def bilinear_sample(grid: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -338,18 +330,33 @@ def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return samples * (1.0 / 255.0)
 
 
+def _frames_and_detail(positions: np.ndarray, material: np.ndarray, triangles: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    vertex_count = positions.shape[0]
+    tangent, bitangent, normal = (np.zeros((vertex_count, 3)) for _ in range(3))
+    detail = np.empty(vertex_count)
+    _frames_kernel(np.ascontiguousarray(positions, dtype=np.float64),
+                   np.ascontiguousarray(material, dtype=np.float64),
+                   np.ascontiguousarray(triangles, dtype=np.int64), tangent, bitangent,
+                   normal, np.zeros((vertex_count, 4)), detail)
+    return tangent, bitangent, normal, detail
+
+
 def local_frames(positions: np.ndarray, material: np.ndarray,
                  triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-vertex orthonormal frames ``(tangent, bitangent, normal)``, each (V, 3): the
     area-weighted normal, the material x direction (∂x/∂u of the deformation, area
     weighted) made orthogonal to it, and their cross product. Never NaN for finite input;
     a vertex without area gets +z and a tangent orthogonal to it."""
-    vertex_count = positions.shape[0]
-    frames = [np.zeros((vertex_count, 3)) for _ in range(3)]
-    _frames_kernel(np.ascontiguousarray(positions, dtype=np.float64),
-                   np.ascontiguousarray(material, dtype=np.float64),
-                   np.ascontiguousarray(triangles, dtype=np.int64), *frames)
-    return frames[0], frames[1], frames[2]
+    return _frames_and_detail(positions, material, triangles)[:3]
+
+
+def normal_detail(positions: np.ndarray, material: np.ndarray,
+                  triangles: np.ndarray) -> np.ndarray:
+    """(V,) [m]: each vertex's offset along its normal (``local_frames``) from the mean of
+    its triangle neighbours — the finest relief of the surface (0 on a plane; a smooth
+    bend of curvature κ adds only about κ·cell²/2). 0 where not finite."""
+    return _frames_and_detail(positions, material, triangles)[3]
 
 
 def _grid_side(sheet: Sheet) -> int | None:
@@ -430,8 +437,6 @@ class PaperAppearance:
         self._width = sheet.width
         self._height = sheet.height
         self._tilt_grid = self._level_tilt(sheet)
-        self._rest_detail = None if self._tilt_grid is None \
-            else np.ascontiguousarray(self._tilt_grid[..., 3:])
 
     @property
     def texture_image(self) -> np.ndarray:
@@ -459,48 +464,51 @@ class PaperAppearance:
         tangent, bitangent, normal = local_frames(grid.reshape(-1, 3), material, triangles)
         tilt = np.stack([np.sum(level_normal * frame, axis=1)
                          for frame in (tangent, bitangent, normal)]
-                        + [normal_detail(grid.reshape(-1, 3), triangles, normal)], axis=1)
+                        + [normal_detail(grid.reshape(-1, 3), material, triangles)], axis=1)
         return tilt.reshape(side, side, 4)
 
-    def _grid_coordinates(self, material: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Fractional (column, row) of material coordinates on the stored tilt grid."""
+    def _looked_up(self, sheet: Sheet) -> np.ndarray:
+        """(V, 4): the stored tilt and rest relief at each vertex's material coordinates."""
         cells = self._tilt_grid.shape[0] - 1
-        return ((material[:, 0] / self._width + 0.5) * cells,
-                (material[:, 1] / self._height + 0.5) * cells)
+        material = np.asarray(sheet.material, dtype=np.float64)
+        return bilinear_sample(self._tilt_grid, (material[:, 0] / self._width + 0.5) * cells,
+                               (material[:, 1] / self._height + 0.5) * cells)
 
-    def detail_presence(self, sheet: Sheet, normal: np.ndarray | None = None) -> float:
-        """How much of the rest shape's fine relief the sheet still has, in [0, 1]: the
-        regression slope of its current ``normal_detail`` on the rest one, over the vertices
-        where the two differ by less than 4 rms of the rest relief (a crease, far larger,
-        does not count). 1 at rest and under any rigid motion, 0 once pressed flat."""
-        if self._tilt_grid is None:
-            return 0.0
-        if normal is None:
-            _, _, normal = local_frames(sheet.positions, sheet.material, sheet.triangles)
-        x, y = self._grid_coordinates(np.asarray(sheet.material, dtype=np.float64))
-        rest = bilinear_sample(self._rest_detail, x, y)[:, 0]
-        now = normal_detail(sheet.positions, sheet.triangles, normal)
+    @staticmethod
+    def _presence(rest: np.ndarray, now: np.ndarray) -> float:
         spread = math.sqrt(float(np.mean(rest * rest)))
         if not spread > 1e-12:
             return 1.0
         kept = np.abs(now - rest) <= 4.0 * spread
-        slope = float(np.sum(now[kept] * rest[kept])) / max(float(np.sum(rest[kept] ** 2)),
-                                                           1e-300)
+        # elementwise sums, not np.dot: a BLAS call can stall for milliseconds when its
+        # threads compete with the simulation for the cores
+        slope = float(np.sum(now[kept] * rest[kept])) \
+            / max(float(np.sum(rest[kept] * rest[kept])), 1e-300)
         return min(max(slope, 0.0), 1.0) if math.isfinite(slope) else 0.0
+
+    def detail_presence(self, sheet: Sheet) -> float:
+        """How much of the rest shape's fine relief the sheet still has, in [0, 1]: the
+        regression slope of its current ``normal_detail`` on the rest one, over the vertices
+        where the two differ by less than 4 rms of the rest relief (a crease, far larger,
+        does not count). 1 at rest and under any rigid motion, 0 once pressed flat
+        (0 when the sheet has no level normals)."""
+        if self._tilt_grid is None:
+            return 0.0
+        now = normal_detail(sheet.positions, sheet.material, sheet.triangles)
+        return self._presence(self._looked_up(sheet)[:, 3], now)
 
     def shading_normals(self, sheet: Sheet) -> np.ndarray:
         """(V, 3) unit normals that light the sheet: the intermediate-level normals carried
         by the current geometry, to the extent the sheet still has the rest shape's fine
         relief (``detail_presence``), or the full-detail normals. Never NaN."""
-        tangent, bitangent, normal = local_frames(sheet.positions, sheet.material,
-                                                  sheet.triangles)
+        tangent, bitangent, normal, now = _frames_and_detail(sheet.positions, sheet.material,
+                                                             sheet.triangles)
         if self._tilt_grid is None:
             return normal
-        presence = self.detail_presence(sheet, normal)
-        x, y = self._grid_coordinates(np.asarray(sheet.material, dtype=np.float64))
+        looked_up = self._looked_up(sheet)
+        presence = self._presence(looked_up[:, 3], now)
         shaded = np.empty_like(normal)
-        _apply_tilt_kernel(self._tilt_grid, x, y, presence, tangent, bitangent, normal,
-                           shaded)
+        _apply_tilt_kernel(looked_up, presence, tangent, bitangent, normal, shaded)
         return shaded
 
     def vertex_light(self, sheet: Sheet) -> np.ndarray:
@@ -509,15 +517,22 @@ class PaperAppearance:
         unchanged (1.0); slopes facing the light are brighter (up to 1/flat), slopes
         facing away darker (down to ambient/flat)."""
         ambient = self.config.ambient
-        lit = ambient + (1.0 - ambient) * np.abs(self.shading_normals(sheet) @ self._light)
+        normals = self.shading_normals(sheet)
+        light = self._light
+        facing = normals[:, 0] * light[0] + normals[:, 1] * light[1] + normals[:, 2] * light[2]
+        lit = ambient + (1.0 - ambient) * np.abs(facing)
         return lit / self._flat_light
 
     def vertex_colors(self, sheet: Sheet) -> np.ndarray:
         """(V, 3) uint8 colours: the white surface lit (``vertex_light``), modulated by the
         texture at the vertices' texture coordinates. Works for any vertex count; never
         NaN."""
-        texture = sample_texture(self._texture, sheet.texture_coordinates())
-        blend = self.config.texture_blend
-        colors = (255.0 * self.vertex_light(sheet))[:, None] * (blend * texture + (1.0 - blend))
-        colors = np.nan_to_num(colors, nan=255.0 * self.config.ambient)
-        return np.clip(np.rint(colors), 0, 255).astype(np.uint8)
+        image = self._texture
+        material = np.asarray(sheet.material, dtype=np.float64)
+        # texture coordinates as Sheet.texture_coordinates, in pixels
+        columns = (material[:, 0] / sheet.width + 0.5) * (image.shape[1] - 1)
+        rows = (0.5 - material[:, 1] / sheet.height) * (image.shape[0] - 1)
+        colors = np.empty((sheet.vertex_count, 3), dtype=np.uint8)
+        _colour_kernel(image, columns, rows, self.vertex_light(sheet),
+                       float(self.config.texture_blend), float(self.config.ambient), colors)
+        return colors
