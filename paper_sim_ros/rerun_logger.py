@@ -36,10 +36,10 @@ import uuid
 import weakref
 from typing import Any
 
+import numba
 import numpy as np
 
 from .core.sheet import AUX, HINGE
-from .core.topology import vertex_normals
 
 ENTITY_INFO = 'paper/info'
 ENTITY_MESH = 'paper/mesh'
@@ -53,7 +53,7 @@ INFO_COMPONENT = 'recording_info_json'
 PARAMETERS_COMPONENT = 'parameters_json'
 METRIC_NAMES = ('step_time', 'real_time_factor', 'energy', 'max_strain', 'breaks', 'folds',
                 'vertices')
-SPRING_COLORS = {HINGE: (90, 110, 140), AUX: (220, 40, 40)}
+SPRING_COLORS = {HINGE: (120, 140, 175), AUX: (220, 40, 40)}
 PROBE_COLOR = (40, 160, 255)
 PAPER_GREY = np.array([236.0, 233.0, 224.0])
 """Colour of the sheet when no appearance module is available (slightly warm white)."""
@@ -106,6 +106,37 @@ def check_writable_rrd(path: str | os.PathLike) -> str:
     return absolute
 
 
+@numba.njit(cache=True)
+def _vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V, 3) float32 area-weighted unit vertex normals: what ``core.topology.vertex_normals``
+    computes (unit +z where a vertex has no area), in one pass (~30x faster at 65x65)."""
+    count = positions.shape[0]
+    normals = np.zeros((count, 3))
+    for t in range(triangles.shape[0]):
+        a, b, c = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        ux = positions[b, 0] - positions[a, 0]
+        uy = positions[b, 1] - positions[a, 1]
+        uz = positions[b, 2] - positions[a, 2]
+        vx = positions[c, 0] - positions[a, 0]
+        vy = positions[c, 1] - positions[a, 1]
+        vz = positions[c, 2] - positions[a, 2]
+        nx, ny, nz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        for corner in range(3):
+            v = triangles[t, corner]
+            normals[v, 0] += nx
+            normals[v, 1] += ny
+            normals[v, 2] += nz
+    result = np.empty((count, 3), dtype=np.float32)
+    for v in range(count):
+        length = math.sqrt(normals[v, 0] ** 2 + normals[v, 1] ** 2 + normals[v, 2] ** 2)
+        if length < 1e-30:
+            result[v, 0], result[v, 1], result[v, 2] = 0.0, 0.0, 1.0
+        else:
+            for axis in range(3):
+                result[v, axis] = normals[v, axis] / length
+    return result
+
+
 def _shaded_grey(normals: np.ndarray) -> np.ndarray:
     """(V, 3) uint8: a warm white lit by a fixed light from above (two-sided, Lambert)."""
     light = np.array([0.3, -0.4, 0.866])
@@ -125,19 +156,23 @@ def _segments(positions: np.ndarray, ends: np.ndarray, strip_type):
     return pa.ListArray.from_arrays(offsets, inner, type=strip_type)
 
 
-def default_blueprint():
-    """A 3D view of the sheet beside the metric plots and the session info."""
+def default_blueprint(center: np.ndarray | None = None, size: float | None = None):
+    """A 3D view of the sheet beside the metric plots and the session info. With the sheet's
+    ``center`` and ``size`` [m], the camera looks at it obliquely from the front, low side."""
     import rerun.blueprint as rrb
 
     def plot(name: str, *entities: str):
         return rrb.TimeSeriesView(name=name, origin=f'/{ENTITY_METRICS}',
                                   contents=[f'/{ENTITY_METRICS}/{e}' for e in entities])
 
+    eye = None
+    if center is not None and size:
+        eye = rrb.EyeControls3D(position=tuple(np.asarray(center) + size * np.array(
+            [0.4, -0.75, 0.55])), look_target=tuple(center), eye_up=(0.0, 0.0, 1.0))
     view_3d = rrb.Spatial3DView(
         name='sheet', origin='/paper',
         contents=['+ /paper/mesh', '+ /paper/springs/**', '+ /paper/probes'],
-        eye_controls=rrb.EyeControls3D(position=(0.25, -0.35, 0.3), look_target=(0.0, 0.0, 0.0),
-                                       eye_up=(0.0, 0.0, 1.0)))
+        eye_controls=eye)
     plots = rrb.Grid(
         plot('step time [s]', 'step_time'),
         plot('real-time factor', 'real_time_factor'),
@@ -150,8 +185,24 @@ def default_blueprint():
     return rrb.Blueprint(
         rrb.Horizontal(view_3d, rrb.Vertical(plots, info, row_shares=[3, 1]),
                        column_shares=[3, 2]),
-        rrb.TimePanel(timeline=TIMELINE),
-        collapse_panels=False)
+        rrb.BlueprintPanel(state='collapsed'),
+        rrb.SelectionPanel(state='collapsed'),
+        rrb.TimePanel(timeline=TIMELINE))
+
+
+def _info_markdown(info: dict, text: str) -> str:
+    """The recording info for people: what ran, then every parameter as JSON."""
+    scenario = info.get('scenario') if isinstance(info.get('scenario'), dict) else {}
+    lines = []
+    if scenario:
+        lines.append(f"**scenario** `{scenario.get('name', '?')}`, "
+                     f"seed {scenario.get('seed', 0)}: {scenario.get('description', '')}")
+    if 'node' in info:
+        lines.append(f"**node** `{info['node']}`")
+    if 'replay_of' in info:
+        lines.append(f"**replay of** `{info['replay_of']}`")
+    lines.append(f'```json\n{text}\n```')
+    return '\n\n'.join(lines)
 
 
 class RerunRecorder:
@@ -206,7 +257,8 @@ class RerunRecorder:
                 sinks.append(rr.GrpcSink(self.connect_url))
             except Exception as error:  # the bindings raise their own types for a bad URL
                 raise ValueError(f'bad rerun_connect URL {self.connect_url!r}: {error}') from None
-        rr.set_sinks(*sinks, default_blueprint=default_blueprint(), recording=stream)
+        # the blueprint goes out with the first frame, when the sheet's size is known
+        rr.set_sinks(*sinks, recording=stream)
         self._stream = stream
         self._rr = rr
         self._strip_type = rr.components.LineStrip3D.arrow_type()
@@ -219,13 +271,13 @@ class RerunRecorder:
         self.recording_info = info
         text = json.dumps(info, indent=1, sort_keys=True)
         stream.log(ENTITY_INFO, rr.AnyValues(**{INFO_COMPONENT: text}), static=True)
-        stream.log(ENTITY_INFO, rr.TextDocument(f'```json\n{text}\n```',
+        stream.log(ENTITY_INFO, rr.TextDocument(_info_markdown(info, text),
                                                 media_type=rr.MediaType.MARKDOWN), static=True)
         # what never changes: colours and widths of the springs and probes
         for kind, entity in ENTITY_SPRINGS.items():
             stream.log(entity, rr.LineStrips3D.from_fields(
                 colors=SPRING_COLORS[kind],
-                radii=rr.Radius.ui_points(1.0 if kind == HINGE else 2.5)), static=True)
+                radii=rr.Radius.ui_points(0.5 if kind == HINGE else 2.5)), static=True)
         stream.log(ENTITY_PROBES, rr.Points3D.from_fields(colors=PROBE_COLOR), static=True)
         for name in ('breaks', 'folds'):
             stream.log(f'{ENTITY_METRICS}/{name}', rr.SeriesLines(names=name), static=True)
@@ -264,6 +316,10 @@ class RerunRecorder:
             self._set_time(sim_time, simulator)
             if not self._parameters_logged:
                 self._log_parameters(simulator)
+                positions = sheet.positions
+                low, high = positions.min(axis=0), positions.max(axis=0)
+                stream.send_blueprint(default_blueprint(
+                    0.5 * (low + high), float(max(np.max(high - low), 0.05))))
             self._log_mesh(sheet, vertex_colors)
             self._log_springs(sheet)
             probes = simulator.probes
@@ -317,12 +373,12 @@ class RerunRecorder:
         rr = self._rr
         positions = sheet.positions
         triangles = sheet.triangles
-        normals = vertex_normals(positions, triangles)
+        normals = _vertex_normals(positions, triangles)
         changed = self._triangles is None or self._triangles.shape != triangles.shape \
             or not np.array_equal(self._triangles, triangles)
         fields: dict[str, Any] = {
             'vertex_positions': positions.astype(np.float32),
-            'vertex_normals': normals.astype(np.float32),
+            'vertex_normals': normals,
         }
         appearance = self._paper_appearance(sheet) if vertex_colors is None else None
         if vertex_colors is not None:
