@@ -10,17 +10,23 @@
   whether damage stayed (the sheet is let go and relaxes; a creased sheet stays bumpy).
 
 Which compression Eq. 7 sees (a decision the paper, written for a soft spring mesh,
-leaves open): with the 'constrained' solver HINGE springs are stretch constraints held
-within ``max_compression`` (0.4 %) of their rest length, so the strain at the end of a
-step says nothing about how hard the sheet is being pushed together. What the
-projection removes is that push: before every projection we record, per HINGE spring,
-the compression of the predicted positions beyond the band (``shortest − l*/l0``) and
-add it up until the next damage check. Eq. 7 then sees ``1 − r = (1 − l/l0) + Σ removed``:
-the compression the spring would have taken in the check interval had the sheet not
-been held inextensible. That sum does not depend on the sub-step count (each sub-step
-removes what the probe pushed in that sub-step: n sub-steps × 1/n of the push), which
-is what SPEC §4.1 asks for. With the 'paper' and 'explicit' solvers nothing is projected
-and Eq. 7 sees the literal ``l/l0`` of the springs.
+leaves open). With the 'paper' and 'explicit' solvers, springs are forces and Eq. 7 sees
+the literal r = l/l0 at each check. With the 'constrained' solver HINGE springs are held
+within ``max_compression`` (0.4 %) of their rest length, so l/l0 says nothing about how
+hard the sheet is pushed together; and what the projection removes in a sub-step depends
+on the sub-step (measured: 5× more at 1 sub-step than at 4 in the squeeze), because an
+inextensible sheet has no compressive strain to speak of. So there Eq. 7 sees the
+compression the probes impose: over each frame, a vertex touching a probe is pushed by
+the probe's travel along the contact normal, u = max(0, Δc·n) n, of which only the part
+tangent to the sheet counts (pressing on a sheet or lifting it does not compress it; its
+bending is what folds it, §4.2), and a HINGE spring (i, j) is shortened by
+(u_i − u_j)·(x_j − x_i)/l; summed over the frames since the last check and divided by l0,
+that is 1 − r. It is what the spring would have been compressed
+by had the sheet not moved out of the way: kinematic, so it does not depend on the
+sub-step count or the solver's convergence (SPEC §4.1), and zero without a moving probe,
+so a sheet at rest never breaks from numerical noise. The table is not a source of
+damage. A break then remembers the crease as if the spring had been pushed to l_t =
+max(r, ``min_crease_ratio``)·l0.
 """
 from __future__ import annotations
 
@@ -73,12 +79,14 @@ def material_preset(name: str) -> dict[str, dict]:
 
 
 @njit(cache=True)
-def accumulate_probe_compression(positions, spring_vertices, rest_length, springs,
+def accumulate_probe_compression(positions, normals, spring_vertices, rest_length, springs,
                                  probe_start, probe_end, probe_radius, reach, compression):
     """Add to ``compression[s]`` the compression the probes' motion over one frame imposes
     on each listed spring: a vertex within ``reach`` × radius of a probe's end centre is
-    pushed by u = max(0, Δc · n) n (Δc: the probe's travel, n: the contact normal); the
-    spring (i, j) shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
+    pushed by u = max(0, Δc · n) n (Δc: the probe's travel, n: the contact normal), of which
+    only the part in the sheet's tangent plane counts (``normals``: the sheet's unit vertex
+    normals; pressing on or lifting the sheet does not compress it); the spring (i, j)
+    shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
     vertex_count = positions.shape[0]
     push = np.zeros((vertex_count, 3))
     for p in range(probe_radius.shape[0]):
@@ -97,9 +105,13 @@ def accumulate_probe_compression(positions, spring_vertices, rest_length, spring
             if normal_travel <= 0.0:
                 continue
             scale = normal_travel / distance
-            push[v, 0] += scale * dx
-            push[v, 1] += scale * dy
-            push[v, 2] += scale * dz
+            ux = scale * dx
+            uy = scale * dy
+            uz = scale * dz
+            across = ux * normals[v, 0] + uy * normals[v, 1] + uz * normals[v, 2]
+            push[v, 0] += ux - across * normals[v, 0]
+            push[v, 1] += uy - across * normals[v, 1]
+            push[v, 2] += uz - across * normals[v, 2]
     for n in range(springs.shape[0]):
         s = springs[n]
         i = spring_vertices[s, 0]
@@ -193,16 +205,17 @@ class MeshEditor:
     def edge_triangles(self, a: int, b: int) -> list[int]:
         """The (one or two) triangles that have the edge (a, b), in index order."""
         triangles = self.triangles.data[:self.triangles.count]
-        return np.flatnonzero(np.any(triangles == a, axis=1)
-                              & np.any(triangles == b, axis=1)).tolist()
+        around = np.flatnonzero((triangles[:, 0] == a) | (triangles[:, 1] == a)
+                                | (triangles[:, 2] == a))
+        return [int(t) for t in around if b in triangles[t]]
 
     def springs_between(self, a: int, b: int, kind: int) -> list[int]:
         """The springs of ``kind`` joining a and b, in index order."""
         count = self.kind.count
         ends = self.spring_vertices.data[:count]
-        return np.flatnonzero((self.kind.data[:count] == kind)
-                              & (((ends[:, 0] == a) & (ends[:, 1] == b))
-                                 | ((ends[:, 0] == b) & (ends[:, 1] == a)))).tolist()
+        touching = np.flatnonzero((ends[:, 0] == a) | (ends[:, 1] == a))
+        return [int(s) for s in touching
+                if self.kind.data[s] == kind and b in (ends[s, 0], ends[s, 1])]
 
     def length(self, spring: int) -> float:
         i, j = self.spring_vertices.data[spring]
@@ -457,19 +470,20 @@ class DamageModel:
         if not np.any(active):
             return
         accumulate_probe_compression(
-            sheet.positions, sheet.spring_vertices, sheet.spring_rest_length,
+            sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
+            sheet.spring_vertices, sheet.spring_rest_length,
             np.flatnonzero(sheet.spring_kind == HINGE),
             np.ascontiguousarray(probes.start[active]), np.ascontiguousarray(probes.end[active]),
             np.ascontiguousarray(probes.radius[active]), PROBE_REACH, self._pushed)
 
     def compression(self, sheet: Sheet) -> np.ndarray:
         """1 − r of every spring as Eq. 7 sees it (see the module docstring)."""
-        pushed = self._pushed if self._pushed.shape[0] == sheet.spring_count \
-            else np.zeros(sheet.spring_count)
-        if self.held_inextensible:
-            return pushed.copy()
-        lengths = spring_lengths(sheet.positions, sheet.spring_vertices)
-        return 1.0 - lengths / sheet.spring_rest_length + pushed
+        if not self.held_inextensible:
+            lengths = spring_lengths(sheet.positions, sheet.spring_vertices)
+            return 1.0 - lengths / sheet.spring_rest_length
+        if self._pushed.shape[0] == sheet.spring_count:
+            return self._pushed.copy()
+        return np.zeros(sheet.spring_count)
 
     # ------------------------------------------------------------------------ stepping
     def advance(self, sheet: Sheet, dt: float, probes=None) -> bool:
@@ -478,7 +492,7 @@ class DamageModel:
         derives from it)."""
         if not self.config.enabled:
             return False
-        if probes is not None and probes.count:
+        if self.held_inextensible and probes is not None and probes.count:
             self.observe_probes(sheet, probes)
         self._clock += dt * self.config.check_rate
         periods = int(math.floor(self._clock + 1e-9))
