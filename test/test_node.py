@@ -15,7 +15,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
@@ -271,6 +271,25 @@ def test_a_flood_of_poses_does_not_stall_the_node(sim):
     assert all(int(values['active_probes']) == 1 for values in reports), \
         'the latest pose of the flood is not in use'
     assert min(float(values['real_time_factor']) for values in reports) > 0.5
+
+
+def test_parameters_are_declared_with_descriptions_and_ranges(sim):
+    names = sim.call(ListParameters, '/paper_sim/list_parameters',
+                     ListParameters.Request()).result.names
+    for name in ('frame_id', 'sheet.nx', 'physics_rate', 'publish_rate', 'markers_rate',
+                 'solver.method', 'solver.jacobi_iterations', 'probe_topics', 'probe_radii',
+                 'probe_timeout', 'contact.ground_enabled', 'seed', 'crumple_count',
+                 'crumple_seed', 'points.dense_samples', 'points.noise_stddev', 'pin_mode',
+                 'use_sim_time', 'rerun_path', 'rerun_connect'):
+        assert name in names, f'{name} is not declared'
+    described = sim.call(DescribeParameters, '/paper_sim/describe_parameters',
+                         DescribeParameters.Request(names=['sheet.nx', 'publish_rate',
+                                                           'probe_radii'])).descriptors
+    nx, publish_rate, radii = described
+    assert nx.read_only and nx.integer_range and nx.integer_range[0].from_value == 3
+    assert not publish_rate.read_only and publish_rate.floating_point_range
+    assert all(d.description for d in described)
+    assert not radii.read_only
 
 
 def test_invalid_parameter_values_are_refused_with_a_reason(sim):
