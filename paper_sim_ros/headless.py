@@ -26,7 +26,7 @@ from .warmup import warm_up
 
 
 def build_simulator(scenario: Scenario) -> Simulator:
-    simulator = Simulator(scenario.config)
+    simulator = Simulator(scenario.config, initial_sheet=scenario.initial_sheet())
     simulator.set_pinned(scenario.pinned_mask(simulator.sheet))
     if scenario.crumple and scenario.config.damage.enabled:
         simulator.crumple(scenario.crumple, scenario.config.seed)
@@ -145,6 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.no_damage:
             mapping['damage'] = {**(mapping.get('damage') or {}), 'enabled': False}
         scenario = scenario_from_mapping(mapping)
+        simulator = build_simulator(scenario)
         if args.metrics_json:
             directory = os.path.dirname(os.path.abspath(args.metrics_json))
             if not os.access(directory, os.W_OK):
@@ -161,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     try:
         warm_up()
-        metrics = run_scenario(scenario, on_frame=on_frame)
+        metrics = run_scenario(scenario, on_frame=on_frame, simulator=simulator)
     except KeyboardInterrupt:
         print('paper_sim_headless: interrupted', file=sys.stderr)
         return 130

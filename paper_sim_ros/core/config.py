@@ -84,13 +84,13 @@ class SolverConfig:
     """Integration sub-steps per frame."""
     jacobi_iterations: int = 10
     """Jacobi iterations of Eq. 6 per sub-step ('paper')."""
-    projective_iterations: int = 3
+    projective_iterations: int = 2
     """Local/global iterations per sub-step ('constrained')."""
     global_stiffness: float = 200.0
     """Weight [N/m] of the held springs in the global step ('constrained'). It is a solver
     weight, not the material's E·t: the strain band, not this, holds paper inextensible;
     far larger weights lock the sheet's rotation in few iterations."""
-    constraint_iterations: int = 4
+    constraint_iterations: int = 6
     """Symmetric Gauss–Seidel strain-limiting sweeps per sub-step ('constrained')."""
     max_stretch: float = 0.003
     """Stretch the projection aims for at most (l/l0 - 1)."""

@@ -2,8 +2,7 @@
 Mass-Spring Systems"; Bouaziz et al. 2014): implicit Euler for springs as alternating
 local and global steps.
 
-  local:  each spring's target vector d_s = (its length clamped into the band, or its
-          rest length) × its current direction;
+  local:  each spring's target vector d_s = its rest length × its current direction;
   global: (M/h² + Σ k_s A_sᵀ A_s) x = M y / h² + Σ k_s A_sᵀ d_s,  y = x + h v + h² f_ext / m.
 
 The matrix depends only on masses, springs and h, so it is factorised once per mesh
@@ -22,8 +21,7 @@ from .kernels import EPSILON_LENGTH
 
 
 @njit(cache=True)
-def local_targets(positions, pinned, spring_vertices, rest_length, weight, band_limited,
-                  shortest, longest, rhs):
+def local_targets(positions, pinned, spring_vertices, rest_length, weight, rhs):
     """Add Σ k_s A_sᵀ d_s to ``rhs`` (V,3), and the pinned ends' k_s x_p to their free
     neighbours (pinned vertices are not unknowns of the global step)."""
     for s in range(spring_vertices.shape[0]):
@@ -35,10 +33,7 @@ def local_targets(positions, pinned, spring_vertices, rest_length, weight, band_
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
         k = weight[s]
         if length > EPSILON_LENGTH:
-            target = rest_length[s]
-            if band_limited[s]:
-                target = min(max(length, shortest * rest_length[s]), longest * rest_length[s])
-            scale = k * target / length
+            scale = k * rest_length[s] / length
             rhs[j, 0] += scale * dx
             rhs[j, 1] += scale * dy
             rhs[j, 2] += scale * dz

@@ -11,6 +11,7 @@ scenarios, user files and recorded sessions all go through one loader:
     sheet: {nx: 65, ny: 65}  # any SheetConfig field
     solver: {dt: 0.0166667}  # any SolverConfig field
     contact: {ground_enabled: true}
+    aged: {amplitude: 0.01}  # optional: start from the fractal aged sheet (SPEC §5)
     probes:
       - name: finger
         radius: 0.01         # m
@@ -27,7 +28,8 @@ import numpy as np
 
 from .config import (ContactConfig, DamageConfig, SheetConfig, SimulationConfig, SolverConfig,
                      from_mapping)
-from .sheet import Sheet
+from .fractal import build_aged_sheet
+from .sheet import Sheet, build_flat_sheet
 
 PIN_MODES = ('none', 'short_edge')
 
@@ -69,6 +71,14 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
                           [2.5, 0.0, sign * 0.12045, -0.003], [3.0, 0.0, sign * 0.12045, 0.05]],
         } for side, sign in (('low', -1.0), ('high', 1.0))],
     },
+    'aged': {
+        'description': 'An aged sheet (the fractal surface of paper §3.4, 10 mm at the top '
+                       'level) settling on a table: its waviness is its own rest shape.',
+        'duration': 3.0,
+        'aged': {'amplitude': 0.01, 'levels': None},
+        'sheet': {'elevation': 0.005},
+        'contact': {'ground_enabled': True},
+    },
     'crumple': {
         'description': 'Random damage (breaks and folds, paper Fig. 8) on a flat sheet, '
                        'then free relaxation without gravity.',
@@ -108,6 +118,17 @@ class Scenario:
     """The mapping this scenario was built from (recorded so a session can be re-run)."""
     crumple: int = 0
     """Random damage events (SPEC §4.3) applied to the sheet before the first frame."""
+    aged_amplitude: float = 0.0
+    """Top-level displacement d_max [m] of the aged (fractal) initial sheet; 0: flat."""
+    aged_levels: int | None = None
+    """Fractal iterations of the aged sheet (None: all, down to single vertices)."""
+
+    def initial_sheet(self) -> Sheet:
+        """The sheet the scenario starts from: flat, or aged (SPEC §5)."""
+        if self.aged_amplitude > 0:
+            return build_aged_sheet(self.config.sheet, self.aged_amplitude, self.aged_levels,
+                                    self.config.seed)
+        return build_flat_sheet(self.config.sheet)
 
     @property
     def frame_count(self) -> int:
@@ -152,7 +173,7 @@ def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
     if not isinstance(mapping, dict):
         raise ValueError('a scenario must be a mapping')
     known = {'name', 'description', 'duration', 'seed', 'pin', 'sheet', 'solver', 'contact',
-             'probes', 'damage', 'crumple'}
+             'probes', 'damage', 'crumple', 'aged'}
     unknown = sorted(set(mapping) - known)
     if unknown:
         raise ValueError(f'unknown scenario keys: {", ".join(unknown)}')
@@ -172,11 +193,19 @@ def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
     crumple = mapping.get('crumple', 0)
     if not (isinstance(crumple, int) and 0 <= crumple <= 1_000_000):
         raise ValueError(f'crumple must be an integer in [0, 1000000], got {crumple!r}')
+    aged = dict(mapping.get('aged') or {})
+    unknown = sorted(set(aged) - {'amplitude', 'levels'})
+    if unknown:
+        raise ValueError(f'unknown aged keys: {", ".join(unknown)}')
+    amplitude = float(aged.get('amplitude', 0.0))
+    if not (math.isfinite(amplitude) and 0 <= amplitude <= 0.1):
+        raise ValueError(f'aged amplitude must be in [0, 0.1] m, got {amplitude}')
     probes = tuple(_probe_from_mapping(p) for p in mapping.get('probes') or [])
     return Scenario(name=str(mapping.get('name', name)),
                     description=str(mapping.get('description', '')),
                     duration=duration, pin=pin, config=config, probes=probes,
-                    mapping=copy.deepcopy(mapping), crumple=crumple)
+                    mapping=copy.deepcopy(mapping), crumple=crumple,
+                    aged_amplitude=amplitude, aged_levels=aged.get('levels'))
 
 
 def builtin_mapping(name: str) -> dict:

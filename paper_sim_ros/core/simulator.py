@@ -130,7 +130,6 @@ class Simulator:
         # their own stiffness: their implicit Euler step
         self._global_weight = np.where(held, self.config.solver.global_stiffness,
                                        sheet.spring_stiffness)
-        self._band_limited = held
         h = self.config.solver.dt / self.config.solver.substeps
         if np.any(~sheet.pinned):
             self._global_step = GlobalStep(sheet.vertex_mass, sheet.pinned,
@@ -241,8 +240,9 @@ class Simulator:
         positions += h * velocities
 
     def _projective_step(self, h: float) -> None:
-        """Implicit Euler of all springs by local/global iterations (core/projective.py),
-        held springs aiming at their strain band, BEND springs at their rest length."""
+        """Implicit Euler of all springs by local/global iterations (core/projective.py).
+        Every spring aims at its rest length here, so the sheet keeps its own shape (an
+        aged sheet its waviness); the strain band is then enforced by _limit_strain."""
         sheet = self.sheet
         solver = self.config.solver
         positions, velocities, mass = sheet.positions, sheet.velocities, sheet.vertex_mass
@@ -253,13 +253,10 @@ class Simulator:
         if self._global_step is None:
             return
         weighted_inertia = (mass / (h * h))[:, None] * inertia
-        shortest = 1.0 - solver.max_compression
-        longest = 1.0 + solver.max_stretch
         for _ in range(solver.projective_iterations):
             rhs = weighted_inertia.copy()
             local_targets(positions, sheet.pinned, sheet.spring_vertices,
-                          sheet.spring_rest_length, self._global_weight, self._band_limited,
-                          shortest, longest, rhs)
+                          sheet.spring_rest_length, self._global_weight, rhs)
             self._global_step.solve(rhs, positions)
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
