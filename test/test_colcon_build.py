@@ -64,3 +64,22 @@ def test_colcon_build_installs_a_runnable_node(tmp_path):
         code = process.stop()
     assert code == 0, process.output()[-3000:]
     assert 'Traceback' not in process.output()
+
+
+def test_launch_file_and_rviz_config_match_the_package():
+    """No launch_ros here: the launch file is compiled and checked for the executables it
+    starts; the RViz config for the topics and frame the node uses."""
+    import yaml
+    launch = (REPO / 'launch' / 'paper_sim.launch.py').read_text()
+    compile(launch, 'paper_sim.launch.py', 'exec')
+    setup = (REPO / 'setup.py').read_text()
+    for executable in ('paper_sim_node', 'paper_sim_scripted_probe'):
+        assert f"executable='{executable}'" in launch
+        assert f"'{executable} = " in setup, f'{executable} is not a console script'
+    rviz = yaml.safe_load((REPO / 'config' / 'paper_sim.rviz').read_text())
+    manager = rviz['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == 'world'
+    topics = {display['Topic']['Value']: display['Class'] for display in manager['Displays']
+              if 'Topic' in display}
+    assert topics == {'/paper/markers': 'rviz_default_plugins/MarkerArray',
+                      '/paper/points': 'rviz_default_plugins/PointCloud2'}
