@@ -104,6 +104,16 @@ class NodeProcess:
         return self.process.returncode
 
 
+def stop_cleanly(process: NodeProcess, signal_number: int = signal.SIGINT) -> str:
+    """Stop the node with a signal; it must exit with status 0 and no traceback. Returns
+    its log."""
+    code = process.stop(signal_number)
+    output = process.output()
+    assert code == 0, f'exit status {code}:\n{output[-3000:]}'
+    assert 'Traceback' not in output, output[-3000:]
+    return output
+
+
 def start_node(log_dir: Path, parameters: dict | None = None, domain_id: int | None = None,
                params_file: Path = CONFIG, executable: list[str] | None = None,
                env_extra: dict | None = None, name: str = 'node') -> NodeProcess:

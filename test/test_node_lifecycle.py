@@ -14,7 +14,7 @@ from sensor_msgs.msg import PointCloud2
 
 from ros_harness import (CONFIG, PYTHON, RosClient, cloud_positions, new_domain_id, overrides,
                          ros_env)
-from ros_harness import start_node
+from ros_harness import start_node, stop_cleanly
 
 SMALL = {'sheet.nx': 9, 'sheet.ny': 9, 'publish_rate': 10.0, 'markers_rate': 2.0}
 
@@ -34,28 +34,20 @@ def run_to_completion(tmp_path, parameters: dict, timeout: float = 60.0):
 
 @pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM],
                          ids=['SIGINT', 'SIGTERM'])
-def test_signal_ends_the_node_cleanly_and_completes_the_recording(tmp_path, signal_number):
-    recording = tmp_path / 'session.rrd'
+def test_a_signal_ends_the_node_cleanly(tmp_path, signal_number):
+    """Exit status 0, no traceback, promptly. (That a recording is complete after either
+    signal is test_rerun_node's subject.)"""
     domain = new_domain_id()
-    process = start_node(tmp_path, {**SMALL, 'rerun_path': str(recording)}, domain_id=domain)
+    process = start_node(tmp_path, SMALL, domain_id=domain)
     client = RosClient(domain)
     try:
         client.subscribe(PointCloud2, 'paper/points')
         wait_for_cloud(client, process)
-        client.spin_for(1.0)
     finally:
         client.close()
-    code = process.stop(signal_number)
-    output = process.output()
-    assert code == 0, f'exit status {code}:\n{output[-3000:]}'
-    assert 'Traceback' not in output, output[-3000:]
-    from rerun.chunk import RrdReader
-    from paper_sim_ros.rerun_replay import read_mesh_frames
-    RrdReader(str(recording)).store()  # needs the footer: the recording was finished
-    frames = read_mesh_frames(str(recording))
-    assert len(frames) >= 5, f'only {len(frames)} frames recorded'
-    assert all(np.isfinite(frame.positions).all() for frame in frames)
-    assert frames[0].positions.shape == (81, 3)
+    started = time.monotonic()
+    stop_cleanly(process, signal_number)
+    assert time.monotonic() - started < 10.0, 'the node took long to stop'
 
 
 def test_an_unwritable_recording_path_is_a_clear_startup_error(tmp_path):
@@ -115,8 +107,7 @@ def test_falling_behind_is_graceful_and_reported(tmp_path):
         assert float(values['sim_time']) == pytest.approx(int(values['frame']) * 1e-3, abs=1e-6)
     finally:
         client.close()
-        code = process.stop()
-    assert code == 0, process.output()[-3000:]
+        stop_cleanly(process)
 
 
 def test_use_sim_time_follows_clock(tmp_path):
@@ -164,5 +155,4 @@ def test_use_sim_time_follows_clock(tmp_path):
         assert np.isfinite(cloud_positions(cloud)).all()
     finally:
         client.close()
-        code = process.stop()
-    assert code == 0, process.output()[-3000:]
+        stop_cleanly(process)
