@@ -10,6 +10,8 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped
+from visualization_msgs.msg import Marker, MarkerArray
 from sensor_msgs.msg import PointCloud2
 
 from ros_harness import (CONFIG, PYTHON, RosClient, cloud_positions, new_domain_id, overrides,
@@ -105,6 +107,44 @@ def test_falling_behind_is_graceful_and_reported(tmp_path):
         assert 'behind real time' in reports[-1].status[0].message
         assert int(values['frames_stepped']) == int(values['frame'])
         assert float(values['sim_time']) == pytest.approx(int(values['frame']) * 1e-3, abs=1e-6)
+    finally:
+        client.close()
+        stop_cleanly(process)
+
+
+def test_several_probes_each_on_its_topic(tmp_path):
+    domain = new_domain_id()
+    process = start_node(tmp_path, {**SMALL, 'probe_topics': ['probe/left', 'probe/right'],
+                                    'probe_radii': [0.02, 0.035], 'markers_rate': 10.0,
+                                    'diagnostics_rate': 4.0}, domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        client.subscribe(MarkerArray, 'paper/markers')
+        client.subscribe(DiagnosticArray, '/diagnostics')
+        wait_for_cloud(client, process)
+        publishers = {side: client.node.create_publisher(PoseStamped, f'probe/{side}', 10)
+                      for side in ('left', 'right')}
+        centres = {'left': (-0.05, 0.0, 0.1), 'right': (0.05, 0.0, 0.1)}
+
+        def publish():
+            for side, publisher in publishers.items():
+                msg = PoseStamped()
+                msg.header.frame_id = 'world'
+                msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = centres[side]
+                msg.pose.orientation.w = 1.0
+                publisher.publish(msg)
+        since = time.monotonic()
+        client.spin_for(1.5, publish)
+        spheres = {m.id: m for m in client.messages('paper/markers', since)[-1].markers
+                   if m.ns == 'paper/probes' and m.action == Marker.ADD}
+        assert sorted(spheres) == [0, 1]
+        assert spheres[0].scale.x == pytest.approx(0.04)
+        assert spheres[1].scale.x == pytest.approx(0.07)
+        assert spheres[0].pose.position.x == pytest.approx(-0.05)
+        assert spheres[1].pose.position.x == pytest.approx(0.05)
+        report = client.messages('/diagnostics', since + 0.5)[-1].status[0]
+        assert {pair.key: pair.value for pair in report.values}['active_probes'] == '2'
     finally:
         client.close()
         stop_cleanly(process)
