@@ -86,7 +86,8 @@ def main() -> None:
                         f'CPU {result["cpu_ms"]:6.1f} ms/frame')
                 if path:
                     line += (f' ({result["fps"] / off:.2f}x the frame rate off; log_frame '
-                             f'{result["log_ms"]:.2f} ms; {result["kib_per_frame"]:.0f} KiB/frame)')
+                             f'{result["log_ms"]:.2f} ms; '
+                             f'{result["kib_per_frame"]:.0f} KiB/frame)')
                 print(line, flush=True)
 
 

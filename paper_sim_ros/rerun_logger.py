@@ -222,7 +222,8 @@ class RerunRecorder:
                  connect_url: str | None = None, recording_info: dict | None = None,
                  *, hinge_every: int = 1, appearance: bool = True) -> None:
         if not isinstance(hinge_every, int) or hinge_every < 0:
-            raise ValueError(f'hinge_every must be an integer >= 0 (0: never), got {hinge_every!r}')
+            raise ValueError(f'hinge_every must be an integer >= 0 (0: never), '
+                             f'got {hinge_every!r}')
         self.path = check_writable_rrd(path) if path else None
         self.connect_url = connect_url or None
         self.hinge_every = hinge_every

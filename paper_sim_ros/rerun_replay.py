@@ -201,8 +201,10 @@ def read_mesh_frames(path: str, chunks: list | None = None) -> list[MeshFrame]:
     return frames
 
 
-def read_scalars(path: str, chunks: list | None = None) -> dict[str, tuple[np.ndarray,
-                                                                             np.ndarray]]:
+Series = tuple[np.ndarray, np.ndarray]
+
+
+def read_scalars(path: str, chunks: list | None = None) -> dict[str, Series]:
     """Every scalar series under ``paper/metrics``: name -> (sim_time [s], values)."""
     chunks = chunks if chunks is not None else read_chunks(path)
     series: dict[str, list[tuple[float, float]]] = {}
@@ -386,8 +388,9 @@ def replay(path: str, rrd: str | None = None,
     if initial is not None and rebuilt.positions_sha256() != initial:
         raise ValueError(f'{path}: the rebuilt initial sheet differs from the recorded one')
     recorder = None
-    callback = on_frame
-    if rrd:
+    if not rrd:
+        callback = on_frame
+    else:
         from .rerun_logger import RerunRecorder
 
         info = dict(read_recording_info(path, chunks))

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from pathlib import Path
 import signal
 import subprocess
@@ -328,3 +327,45 @@ def test_headless_interrupted_recording_is_complete_and_replayable(tmp_path, sig
     for original, copy in zip(meshes, replayed):
         np.testing.assert_array_equal(copy.positions, original.positions,
                                       err_msg=f'frame {original.frame} of the replay')
+
+
+# ---------------------------------------------------------------------------- streaming
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+def test_streams_to_a_running_rerun_server(tmp_path):
+    """``connect_url``: the frames reach a real Rerun gRPC server (the ``rerun`` binary of this
+    SDK, saving what it receives), which stands in for a viewer."""
+    rerun_binary = Path(sys.executable).with_name('rerun')
+    port = _free_port()
+    received = tmp_path / 'received.rrd'
+    server = subprocess.Popen([str(rerun_binary), '--port', str(port), '--save', str(received)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        time.sleep(2.0)
+        assert server.poll() is None, server.stderr.read().decode()[-2000:]
+        scenario = scenario_from_mapping({**PINCH, 'duration': 0.2})
+        simulator = build_simulator(scenario)
+        recorder = RerunRecorder('paper_sim_test',
+                                 connect_url=f'rerun+http://127.0.0.1:{port}/proxy',
+                                 recording_info={'scenario': scenario.mapping})
+        for frame in range(1, scenario.frame_count + 1):
+            simulator.set_probes(*scenario.probe_inputs(frame * scenario.config.solver.dt))
+            simulator.step_frame()
+            recorder.log_frame(simulator.time, simulator)
+        recorder.close()
+        deadline = time.monotonic() + 30
+        while _logged_frames(received) < scenario.frame_count and time.monotonic() < deadline:
+            time.sleep(0.2)
+    finally:
+        server.terminate()
+        server.wait(10)
+    meshes = rerun_replay.read_mesh_frames(str(received))
+    assert len(meshes) == scenario.frame_count
+    assert rerun_replay.read_recording_info(str(received))['scenario']['name'] == 'pinch'
+    np.testing.assert_allclose(meshes[-1].positions, simulator.sheet.positions, atol=1e-6)
