@@ -21,9 +21,10 @@ from .kernels import EPSILON_LENGTH
 
 
 @njit(cache=True)
-def local_targets(positions, pinned, spring_vertices, rest_length, weight, rhs):
-    """Add Σ k_s A_sᵀ d_s to ``rhs`` (V,3), and the pinned ends' k_s x_p to their free
-    neighbours (pinned vertices are not unknowns of the global step)."""
+def local_targets(positions, spring_vertices, rest_length, weight, in_matrix, rhs):
+    """The springs' part of the global step's right-hand side: k_s A_sᵀ d_s for every
+    spring, and for a spring left out of the matrix (``in_matrix`` false, the soft BEND
+    springs; see GlobalStep) also -k_s A_sᵀ A_s x at the current iterate."""
     for s in range(spring_vertices.shape[0]):
         i = spring_vertices[s, 0]
         j = spring_vertices[s, 1]
@@ -32,22 +33,15 @@ def local_targets(positions, pinned, spring_vertices, rest_length, weight, rhs):
         dz = positions[j, 2] - positions[i, 2]
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
         k = weight[s]
-        if length > EPSILON_LENGTH:
-            scale = k * rest_length[s] / length
-            rhs[j, 0] += scale * dx
-            rhs[j, 1] += scale * dy
-            rhs[j, 2] += scale * dz
-            rhs[i, 0] -= scale * dx
-            rhs[i, 1] -= scale * dy
-            rhs[i, 2] -= scale * dz
-        if pinned[j]:
-            rhs[i, 0] += k * positions[j, 0]
-            rhs[i, 1] += k * positions[j, 1]
-            rhs[i, 2] += k * positions[j, 2]
-        if pinned[i]:
-            rhs[j, 0] += k * positions[i, 0]
-            rhs[j, 1] += k * positions[i, 1]
-            rhs[j, 2] += k * positions[i, 2]
+        scale = k * rest_length[s] / length if length > EPSILON_LENGTH else 0.0
+        if not in_matrix[s]:
+            scale -= k
+        rhs[j, 0] += scale * dx
+        rhs[j, 1] += scale * dy
+        rhs[j, 2] += scale * dz
+        rhs[i, 0] -= scale * dx
+        rhs[i, 1] -= scale * dy
+        rhs[i, 2] -= scale * dz
 
 
 @njit(cache=True)
@@ -116,17 +110,27 @@ class GlobalStep:
     """The prefactored global step for one mesh, pin set and sub-step length."""
 
     def __init__(self, vertex_mass: np.ndarray, pinned: np.ndarray,
-                 spring_vertices: np.ndarray, weight: np.ndarray, h: float) -> None:
+                 spring_vertices: np.ndarray, weight: np.ndarray, in_matrix: np.ndarray,
+                 h: float) -> None:
+        """Springs where ``in_matrix`` is false stay out of the matrix and are taken at the
+        current iterate instead (local_targets). That splitting converges while their
+        stiffness is under a quarter of the matrix springs' (the iteration's eigenvalues
+        stay in (0, 2)); the caller keeps it so. BEND springs reach two cells across:
+        leaving them out cuts the factor's fill, and each solve, by about three."""
         vertex_count = vertex_mass.shape[0]
+        spring_vertices = spring_vertices[in_matrix]
+        weight = weight[in_matrix]
         first, second = spring_vertices[:, 0], spring_vertices[:, 1]
         laplacian = sparse.coo_matrix(
             (np.concatenate([weight, weight, -weight, -weight]),
              (np.concatenate([first, second, first, second]),
               np.concatenate([first, second, second, first]))),
             shape=(vertex_count, vertex_count)).tocsr()
-        system = sparse.diags(vertex_mass / (h * h)) + laplacian
+        system = (sparse.diags(vertex_mass / (h * h)) + laplacian).tocsr()
         self.free = np.flatnonzero(~pinned).astype(np.int64)
-        self.inertia = vertex_mass / (h * h)
+        self.pinned = np.flatnonzero(pinned).astype(np.int64)
+        # pinned vertices are not unknowns: their couplings go to the right-hand side
+        self._pinned_coupling = system[self.free][:, self.pinned].tocsr()
         reduced = system[self.free][:, self.free].tocsc()
         # symmetric positive definite: no pivoting needed, minimum degree on Aᵀ + A
         factor = sparse_linalg.splu(reduced, permc_spec='MMD_AT_PLUS_A',
@@ -138,5 +142,8 @@ class GlobalStep:
         self.factor_size = int(factor.L.nnz + factor.U.nnz)
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
-        """Overwrite the free vertices of ``positions`` with the global step's solution."""
+        """Overwrite the free vertices of ``positions`` with the global step's solution
+        (``rhs`` is consumed)."""
+        if self.pinned.size:
+            rhs[self.free] -= self._pinned_coupling @ positions[self.pinned]
         _solve_factored(*self._factors, self.free, rhs, positions, self._work)

@@ -130,10 +130,13 @@ class Simulator:
         # their own stiffness: their implicit Euler step
         self._global_weight = np.where(held, self.config.solver.global_stiffness,
                                        sheet.spring_stiffness)
+        # soft springs stay out of the factor (a third of its fill) while that converges
+        self._in_matrix = held | (self._global_weight > 0.25 * self.config.solver.global_stiffness)
         h = self.config.solver.dt / self.config.solver.substeps
         if np.any(~sheet.pinned):
             self._global_step = GlobalStep(sheet.vertex_mass, sheet.pinned,
-                                           sheet.spring_vertices, self._global_weight, h)
+                                           sheet.spring_vertices, self._global_weight,
+                                           self._in_matrix, h)
 
     def _build_attachments(self) -> None:
         sheet = self.sheet
@@ -255,8 +258,8 @@ class Simulator:
         weighted_inertia = (mass / (h * h))[:, None] * inertia
         for _ in range(solver.projective_iterations):
             rhs = weighted_inertia.copy()
-            local_targets(positions, sheet.pinned, sheet.spring_vertices,
-                          sheet.spring_rest_length, self._global_weight, rhs)
+            local_targets(positions, sheet.spring_vertices, sheet.spring_rest_length,
+                          self._global_weight, self._in_matrix, rhs)
             self._global_step.solve(rhs, positions)
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
