@@ -54,22 +54,20 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
                           [1.5, 0.0, 0.0, 0.009], [2.5, 0.0, 0.0, 0.05]],
         }],
     },
-    # two fingertips land on the short edges (5 mm of the sheet under each), press 3 mm into
-    # the (yielding) table and push the edges towards each other by 30 % of the length
-    # (2 × 44.55 mm) in 2 s, then lift. (They push the edges rather than drag the sheet from
-    # on top: the contact model's friction grows with the sub-step's penetration, which is
-    # too small to grip paper.)
+    # two fingertips rest on the sheet 1 cm in from its short edges, pressed 3 mm into the
+    # (yielding) table, and slide towards each other by 30 % of the length (2 × 44.55 mm)
+    # in 2 s, then lift off
     'squeeze': {
-        'description': 'A4 sheet flat on a table; two 1.5 cm probes press down at its short '
-                       'edges and push them towards each other by 30 % of its length in 2 s '
-                       '(the sheet buckles between them), then lift off.',
+        'description': 'A4 sheet flat on a table; two 1.5 cm probes rest on it near its short '
+                       'edges, slide towards each other by 30 % of its length in 2 s (the '
+                       'sheet buckles between them), then lift off.',
         'duration': 4.0,
         'contact': {'ground_enabled': True},
         'probes': [{
             'name': f'finger_{side}',
             'radius': 0.015,
-            'keyframes': [[0.0, 0.0, sign * 0.1585, 0.05], [0.5, 0.0, sign * 0.1585, -0.003],
-                          [2.5, 0.0, sign * 0.11395, -0.003], [3.0, 0.0, sign * 0.11395, 0.05]],
+            'keyframes': [[0.0, 0.0, sign * 0.1385, 0.05], [0.5, 0.0, sign * 0.1385, 0.012],
+                          [2.5, 0.0, sign * 0.09395, 0.012], [3.0, 0.0, sign * 0.09395, 0.05]],
         } for side, sign in (('low', -1.0), ('high', 1.0))],
     },
     'aged': {

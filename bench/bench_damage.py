@@ -1,0 +1,122 @@
+"""Damage (issue 3): what it costs per step, and the parameter sweeps of the paper's
+Fig. 12–13 in numbers.
+
+    .venv/bin/python bench/bench_damage.py cost --grid 33 65
+    .venv/bin/python bench/bench_damage.py fragility --grid 33 --phi 0.5 1 2 4 8
+    .venv/bin/python bench/bench_damage.py psi --grid 33 --psi 0 0.25 0.5 1 1.5
+    .venv/bin/python bench/bench_damage.py substeps --grid 33 65
+
+cost: the built-in 'squeeze' stepped with damage on and off; ms per frame for the whole
+step, and the part spent in damage (the check, the mesh surgery and the solver's rebuild
+after a change). fragility: squeeze breaks and folds per φ. psi: the 'crumple' scenario
+with breaks only (no folds), mean ridge height of the creases and the relaxed deviation
+per ψ. substeps: squeeze breaks and relaxed deviation at 1, 2 and 4 sub-steps.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
+
+from paper_sim_ros.core.damage import relaxed_deviation, ridge_heights  # noqa: E402
+from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping,  # noqa: E402
+                                          with_overrides)
+from paper_sim_ros.headless import build_simulator  # noqa: E402
+
+
+def run(name: str, grid: int, damage: dict, substeps: int = 1, seed: int = 0):
+    """Step a built-in scenario; returns the simulator and the seconds spent (total, damage)."""
+    mapping = with_overrides(builtin_mapping(name), grid=grid, substeps=substeps, seed=seed)
+    mapping['damage'] = damage
+    scenario = scenario_from_mapping(mapping)
+    simulator = build_simulator(scenario)
+    spent = {'damage': 0.0}
+    advance, rebuild = simulator.damage.advance, simulator.topology_changed
+
+    def timed(function):
+        def wrapper(*args, **kwargs):
+            started = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                spent['damage'] += time.perf_counter() - started
+        return wrapper
+
+    simulator.damage.advance = timed(advance)
+    simulator.topology_changed = timed(rebuild)
+    dt = scenario.config.solver.dt
+    started = time.perf_counter()
+    for frame in range(scenario.frame_count):
+        simulator.set_probes(*scenario.probe_inputs((frame + 1) * dt))
+        simulator.step_frame()
+    return simulator, scenario.frame_count, time.perf_counter() - started, spent['damage']
+
+
+def cost(grids: list[int]) -> None:
+    run('squeeze', 17, {})  # warm-up: numba compilation
+    print('| grid | damage | ms/frame | of which damage | breaks | folds | vertices |')
+    print('|---|---|---|---|---|---|---|')
+    for grid in grids:
+        for enabled in (False, True):
+            simulator, frames, total, damage = run('squeeze', grid, {'enabled': enabled})
+            print(f'| {grid} | {"on" if enabled else "off"} | {1e3 * total / frames:.2f} '
+                  f'| {1e3 * damage / frames:.2f} | {simulator.breaks} | {simulator.folds} '
+                  f'| {simulator.sheet.vertex_count} |')
+
+
+def fragility(grids: list[int], phis: list[float]) -> None:
+    print('| grid | φ | breaks | folds | relaxed deviation [mm] |')
+    print('|---|---|---|---|---|')
+    for grid in grids:
+        for phi in phis:
+            simulator, *_ = run('squeeze', grid, {'fragility': phi})
+            print(f'| {grid} | {phi:g} | {simulator.breaks} | {simulator.folds} '
+                  f'| {1e3 * relaxed_deviation(simulator):.2f} |')
+
+
+def psi(grids: list[int], psis: list[float]) -> None:
+    print('| grid | ψ | breaks | mean ridge height [mm] | max ridge [mm] '
+          '| relaxed deviation [mm] |')
+    print('|---|---|---|---|---|---|')
+    for grid in grids:
+        for value in psis:
+            simulator, *_ = run('crumple', grid, {'area_conservation': value,
+                                                  'crumple_fold_fraction': 0.0,
+                                                  'fold_threshold': 0.0})
+            heights = ridge_heights(simulator.sheet.positions, simulator.damage.creases)
+            print(f'| {grid} | {value:g} | {simulator.breaks} | {1e3 * heights.mean():.2f} '
+                  f'| {1e3 * heights.max():.2f} | {1e3 * relaxed_deviation(simulator):.2f} |')
+
+
+def substeps(grids: list[int]) -> None:
+    print('| grid | substeps | breaks | folds | relaxed deviation [mm] |')
+    print('|---|---|---|---|---|')
+    for grid in grids:
+        for count in (1, 2, 4):
+            simulator, *_ = run('squeeze', grid, {}, substeps=count)
+            print(f'| {grid} | {count} | {simulator.breaks} | {simulator.folds} '
+                  f'| {1e3 * relaxed_deviation(simulator):.2f} |')
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('what', choices=('cost', 'fragility', 'psi', 'substeps'))
+    parser.add_argument('--grid', type=int, nargs='+', default=[33])
+    parser.add_argument('--phi', type=float, nargs='+', default=[0.5, 1.0, 2.0, 4.0, 8.0])
+    parser.add_argument('--psi', type=float, nargs='+', default=[0.0, 0.25, 0.5, 1.0, 1.5])
+    args = parser.parse_args()
+    if args.what == 'cost':
+        cost(args.grid)
+    elif args.what == 'fragility':
+        fragility(args.grid, args.phi)
+    elif args.what == 'psi':
+        psi(args.grid, args.psi)
+    else:
+        substeps(args.grid)
+
+
+if __name__ == '__main__':
+    main()
