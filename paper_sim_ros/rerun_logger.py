@@ -27,11 +27,14 @@ import dataclasses
 import datetime
 import functools
 import json
+import logging
 import math
 import os
 import signal
+import socket
 import sys
 import threading
+import urllib.parse
 import uuid
 import weakref
 from typing import Any
@@ -51,8 +54,6 @@ TIMELINE = 'sim_time'
 FRAME_TIMELINE = 'frame'
 INFO_COMPONENT = 'recording_info_json'
 PARAMETERS_COMPONENT = 'parameters_json'
-METRIC_NAMES = ('step_time', 'real_time_factor', 'energy', 'max_strain', 'breaks', 'folds',
-                'vertices')
 SPRING_COLORS = {HINGE: (120, 140, 175), AUX: (220, 40, 40)}
 PROBE_COLOR = (40, 160, 255)
 PAPER_GREY = np.array([236.0, 233.0, 224.0])
@@ -104,6 +105,23 @@ def check_writable_rrd(path: str | os.PathLike) -> str:
         raise OSError(error.errno, f'cannot write Rerun recording {absolute}: '
                                    f'{error.strerror}', absolute) from error
     return absolute
+
+
+def check_reachable(url: str, timeout: float = 3.0) -> None:
+    """A Rerun gRPC URL (``rerun+http://host:port/proxy``) with a server listening, or a clear
+    error: ``ValueError`` for a malformed URL, ``ConnectionError`` when nothing answers (the
+    SDK would otherwise buffer the whole session and give up only at the end)."""
+    parsed = urllib.parse.urlparse(url)
+    if parsed.scheme not in ('rerun', 'rerun+http', 'rerun+https') or not parsed.hostname:
+        raise ValueError(f'rerun_connect must be a Rerun gRPC URL such as '
+                         f'rerun+http://127.0.0.1:9876/proxy, got {url!r}')
+    port = parsed.port or (443 if parsed.scheme == 'rerun+https' else 9876)
+    try:
+        with socket.create_connection((parsed.hostname, port), timeout=timeout):
+            pass
+    except OSError as error:
+        raise ConnectionError(f'no Rerun viewer or server at {url} ({error}); start one with '
+                              f'`rerun` (it listens on port 9876) or record to a file') from None
 
 
 @numba.njit(cache=True)
@@ -237,14 +255,15 @@ class RerunRecorder:
         self._texture_logged = False
         self._aux_logged = False
         self._parameters_logged = False
+        self.close_error: str | None = None
+        """Why ``close`` could not deliver everything (a viewer that went away), else None."""
         self.recording_info = _jsonable(recording_info or {})
         if self.path is None and self.connect_url is None:
             return
         import rerun as rr
 
-        if self.connect_url is not None and not self.connect_url.startswith('rerun'):
-            raise ValueError(f'rerun_connect must be a Rerun gRPC URL such as '
-                             f'rerun+http://127.0.0.1:9876/proxy, got {self.connect_url!r}')
+        if self.connect_url is not None:
+            check_reachable(self.connect_url)
         stream = rr.RecordingStream(application_id, recording_id=uuid.uuid4(),
                                     send_properties=True)
         if not rr.is_enabled(stream):
@@ -453,7 +472,10 @@ class RerunRecorder:
             if stream is None:
                 return
             try:
-                stream.flush()
+                stream.flush(timeout_sec=30.0)
+            except RuntimeError as error:  # a viewer that went away: the file is still finished
+                self.close_error = str(error)
+                logging.getLogger(__name__).warning(f'Rerun recording not fully sent: {error}')
             finally:
                 stream.disconnect()
                 atexit.unregister(self._atexit_hook)

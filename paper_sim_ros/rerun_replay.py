@@ -88,25 +88,34 @@ def _time_seconds(batch) -> list[float]:
     return [value / 1e9 for value in values]
 
 
-def _temporal_rows(chunks: list, entity: str, component: str) -> list[tuple[int, float, Any]]:
-    """(frame, sim_time, value) of every row of ``entity`` that holds ``component``,
-    sorted by sim_time then frame."""
-    rows = []
+def _rows(chunks: list, entity: str, components: tuple[str, ...]):
+    """(frame, sim_time [s], values) of every temporal row of ``entity`` whose first component
+    is set; ``values`` are the components' arrow scalars (None where a row lacks one)."""
     for chunk in chunks:
         if _entity(chunk) != entity or chunk.is_static:
             continue
         batch = chunk.to_record_batch()
-        if component not in batch.schema.names or TIMELINE not in batch.schema.names:
+        names = batch.schema.names
+        if components[0] not in names or TIMELINE not in names:
             continue
-        frames = batch.column(FRAME_TIMELINE).to_pylist() \
-            if FRAME_TIMELINE in batch.schema.names else [None] * batch.num_rows
+        frames = batch.column(FRAME_TIMELINE).to_pylist() if FRAME_TIMELINE in names \
+            else [0] * batch.num_rows
         times = _time_seconds(batch)
-        column = batch.column(component)
+        columns = [batch.column(name) if name in names else None for name in components]
         for row in range(batch.num_rows):
-            if column[row].is_valid:
-                rows.append((frames[row], times[row], column[row]))
-    rows.sort(key=lambda row: (row[1], row[0] if row[0] is not None else 0))
-    return rows
+            if not columns[0][row].is_valid:
+                continue
+            values = [column[row] if column is not None and column[row].is_valid else None
+                      for column in columns]
+            yield frames[row], times[row], values
+
+
+def _numbers(scalar, dtype) -> np.ndarray:
+    """An arrow list scalar (of numbers, or of fixed-size lists of numbers) as a flat array."""
+    values = scalar.values
+    if hasattr(values, 'flatten'):
+        values = values.flatten()
+    return values.to_numpy(zero_copy_only=False).astype(dtype, copy=False)
 
 
 def _static_text(chunks: list, component: str) -> str | None:
@@ -147,21 +156,11 @@ def read_probe_inputs(path: str, chunks: list | None = None,
     """The probe inputs of every recorded frame, in sim_time order. Raises ``ValueError`` when
     the frame counter went back (the session was reset): such a session is several runs."""
     chunks = chunks if chunks is not None else read_chunks(path)
-    inputs = []
-    for chunk in chunks:
-        if _entity(chunk) != ENTITY_PROBE_INPUTS or chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        frames = batch.column(FRAME_TIMELINE).to_pylist()
-        times = _time_seconds(batch)
-        centers, radii, active = (batch.column(name).to_pylist()
-                                  for name in ('centers', 'radii', 'active'))
-        for row in range(batch.num_rows):
-            inputs.append(ProbeInput(
-                frame=frames[row], sim_time=times[row],
-                centers=np.asarray(centers[row], dtype=np.float64).reshape(-1, 3),
-                radii=np.asarray(radii[row], dtype=np.float64),
-                active=np.asarray(active[row], dtype=bool)))
+    inputs = [ProbeInput(frame=frame, sim_time=time,
+                         centers=_numbers(centers, np.float64).reshape(-1, 3),
+                         radii=_numbers(radii, np.float64), active=_numbers(active, bool))
+              for frame, time, (centers, radii, active)
+              in _rows(chunks, ENTITY_PROBE_INPUTS, ('centers', 'radii', 'active'))]
     inputs.sort(key=lambda item: (item.sim_time, item.frame))
     if check_resets:
         _refuse_resets(path, inputs)
@@ -179,24 +178,11 @@ def _refuse_resets(path: str, inputs: list[ProbeInput]) -> None:
 def read_mesh_frames(path: str, chunks: list | None = None) -> list[MeshFrame]:
     """Every logged frame of ``paper/mesh`` (sim_time order) with its vertex positions."""
     chunks = chunks if chunks is not None else read_chunks(path)
-    frames = []
-    for chunk in chunks:
-        if _entity(chunk) != ENTITY_MESH or chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        frame_numbers = batch.column(FRAME_TIMELINE).to_pylist()
-        times = _time_seconds(batch)
-        positions = batch.column(POSITIONS)
-        triangles = batch.column(TRIANGLES) if TRIANGLES in batch.schema.names else None
-        for row in range(batch.num_rows):
-            if not positions[row].is_valid:
-                continue
-            flat = positions[row].values.flatten().to_numpy(zero_copy_only=False)
-            count = None
-            if triangles is not None and triangles[row].is_valid:
-                count = len(triangles[row])
-            frames.append(MeshFrame(frame=frame_numbers[row], sim_time=times[row],
-                                    positions=flat.reshape(-1, 3), triangle_count=count))
+    frames = [MeshFrame(frame=frame, sim_time=time,
+                        positions=_numbers(positions, np.float32).reshape(-1, 3),
+                        triangle_count=None if triangles is None else len(triangles))
+              for frame, time, (positions, triangles)
+              in _rows(chunks, ENTITY_MESH, (POSITIONS, TRIANGLES))]
     frames.sort(key=lambda mesh: (mesh.sim_time, mesh.frame))
     return frames
 
@@ -208,17 +194,12 @@ def read_scalars(path: str, chunks: list | None = None) -> dict[str, Series]:
     """Every scalar series under ``paper/metrics``: name -> (sim_time [s], values)."""
     chunks = chunks if chunks is not None else read_chunks(path)
     series: dict[str, list[tuple[float, float]]] = {}
-    for chunk in chunks:
-        entity = _entity(chunk)
-        if not entity.startswith(ENTITY_METRICS + '/') or chunk.is_static:
-            continue
-        batch = chunk.to_record_batch()
-        if SCALARS not in batch.schema.names:
-            continue
-        name = entity[len(ENTITY_METRICS) + 1:]
-        for time, value in zip(_time_seconds(batch), batch.column(SCALARS).to_pylist()):
-            if value:
-                series.setdefault(name, []).append((time, value[0]))
+    names = {_entity(chunk) for chunk in chunks if not chunk.is_static}
+    for entity in sorted(names):
+        if entity.startswith(ENTITY_METRICS + '/'):
+            series[entity[len(ENTITY_METRICS) + 1:]] = [
+                (time, value.values[0].as_py())
+                for _, time, (value,) in _rows(chunks, entity, (SCALARS,)) if len(value)]
     result = {}
     for name, points in series.items():
         points.sort()

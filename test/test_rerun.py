@@ -169,7 +169,7 @@ def test_springs_and_probes_are_logged(pinch_recording):
 
 
 # --------------------------------------------------------------------------- bad output
-def test_unwritable_path_is_a_clear_error(tmp_path):
+def test_unwritable_path_or_absent_viewer_is_a_clear_error(tmp_path):
     with pytest.raises(OSError, match='does not exist'):
         RerunRecorder('t', path=str(tmp_path / 'missing' / 'x.rrd'))
     with pytest.raises(ValueError, match='is a directory'):
@@ -180,6 +180,8 @@ def test_unwritable_path_is_a_clear_error(tmp_path):
         RerunRecorder('t', path='/proc/paper_sim_test.rrd')  # unwritable, even for root
     with pytest.raises(ValueError, match='rerun_connect'):
         RerunRecorder('t', connect_url='http://localhost:9876')
+    with pytest.raises(ConnectionError, match='no Rerun viewer or server'):
+        RerunRecorder('t', connect_url=f'rerun+http://127.0.0.1:{_free_port()}/proxy')
 
 
 def test_headless_refuses_an_unwritable_rrd_before_running(tmp_path, capsys):
