@@ -26,7 +26,7 @@ setup(
         'console_scripts': [
             'paper_sim_headless = paper_sim_ros.headless:main',
             'paper_sim_node = paper_sim_ros.node:main',
-            'paper_sim_scripted_probe = paper_sim_ros.scripted_probe:main',
+            'paper_sim_probe = paper_sim_ros.scripted_probe:main',
         ],
     },
 )

@@ -1,7 +1,7 @@
-"""Launch the paper simulation, optionally with RViz and the scripted demo probe.
+"""Launch the paper simulation with RViz, optionally with the scripted demo probe.
 
-    ros2 launch paper_sim_ros paper_sim.launch.py
-    ros2 launch paper_sim_ros paper_sim.launch.py rviz:=true scripted_probe:=true
+    ros2 launch paper_sim_ros paper_sim.launch.py                  # node + RViz
+    ros2 launch paper_sim_ros paper_sim.launch.py scripted_probe:=true rviz:=false
     ros2 launch paper_sim_ros paper_sim.launch.py params_file:=/path/to/my.yaml use_sim_time:=true
 
 Needs a ROS 2 install with ``launch`` and ``launch_ros`` (they are not on PyPI; without them,
@@ -27,14 +27,14 @@ def generate_launch_description() -> LaunchDescription:
             description='Node-keyed parameter file of the paper_sim node'),
         DeclareLaunchArgument('use_sim_time', default_value='false',
                               description='Follow /clock instead of the wall clock'),
-        DeclareLaunchArgument('rviz', default_value='false',
+        DeclareLaunchArgument('rviz', default_value='true',
                               description='Start RViz with config/paper_sim.rviz'),
         DeclareLaunchArgument('scripted_probe', default_value='false',
                               description='Start the scripted probe that presses and drags'),
         Node(package='paper_sim_ros', executable='paper_sim_node', name='paper_sim',
              output='screen', emulate_tty=True,
              parameters=[params_file, {'use_sim_time': use_sim_time}]),
-        Node(package='paper_sim_ros', executable='paper_sim_scripted_probe',
+        Node(package='paper_sim_ros', executable='paper_sim_probe',
              name='scripted_probe', output='screen',
              parameters=[{'use_sim_time': use_sim_time}],
              condition=IfCondition(LaunchConfiguration('scripted_probe'))),

@@ -1,6 +1,6 @@
 """A scripted probe for the demo: approaches, presses into the sheet, drags across, retreats.
 
-    ros2 run paper_sim_ros paper_sim_scripted_probe
+    ros2 run paper_sim_ros paper_sim_probe
     python -m paper_sim_ros.scripted_probe --ros-args -p period:=6.0
 
 Publishes ``geometry_msgs/PoseStamped`` on ``probe/pose`` (parameter ``topic``) in

@@ -30,7 +30,7 @@ def test_colcon_build_installs_a_runnable_node(tmp_path):
     prefix = tmp_path / 'install' / 'paper_sim_ros'
     share = prefix / 'share' / 'paper_sim_ros'
     for relative in ('lib/paper_sim_ros/paper_sim_node',
-                     'lib/paper_sim_ros/paper_sim_scripted_probe',
+                     'lib/paper_sim_ros/paper_sim_probe',
                      'share/ament_index/resource_index/packages/paper_sim_ros',
                      'share/paper_sim_ros/package.xml',
                      'share/paper_sim_ros/config/paper_sim.yaml',
@@ -71,7 +71,7 @@ def test_launch_file_and_rviz_config_match_the_package():
     launch = (REPO / 'launch' / 'paper_sim.launch.py').read_text()
     compile(launch, 'paper_sim.launch.py', 'exec')
     setup = (REPO / 'setup.py').read_text()
-    for executable in ('paper_sim_node', 'paper_sim_scripted_probe'):
+    for executable in ('paper_sim_node', 'paper_sim_probe'):
         assert f"executable='{executable}'" in launch
         assert f"'{executable} = " in setup, f'{executable} is not a console script'
     rviz = yaml.safe_load((REPO / 'config' / 'paper_sim.rviz').read_text())
