@@ -262,6 +262,7 @@ class PaperSimNode(Node):
         try:
             settings_from_values(values)
         except (ValueError, TypeError) as error:
+            self.get_logger().warn(f'refused parameter change: {error}')
             return SetParametersResult(successful=False, reason=str(error))
         return SetParametersResult(successful=True)
 

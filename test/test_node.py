@@ -310,6 +310,8 @@ def test_invalid_parameter_values_are_refused_with_a_reason(sim):
         assert reason in results[0].reason, results[0].reason
     after = {name: get_parameter(sim, name) for name in before}
     assert after == before, 'a refused change altered a parameter'
+    assert "refused parameter change: pin_mode must be one of none, short_edge, got 'sideways'" \
+        in sim.process.output()
     since = time.monotonic()
     sim.spin_for(1.0)
     assert_finite_outputs(sim, since)
