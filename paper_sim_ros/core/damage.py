@@ -67,6 +67,11 @@ PROBE_REACH = 1.1
 """A vertex within this × radius of a probe counts as touched by it (contact leaves touched
 vertices on the sphere, give or take the stretch projection's last corrections)."""
 
+FOLD_MIN_AREA = 0.7
+"""An edge folds only while its two triangles keep this share of their flat area: a BEND
+spring also comes short when the solver momentarily crushes a region under a probe, and
+that is not a fold to remember."""
+
 FLAT_BULGE = 1e-3
 """|Δn · d̂| below which the sheet counts as flat across an edge and the side is random."""
 
@@ -412,6 +417,21 @@ class MeshEditor:
         self.stiffness.data[spring] = self.aux_stiffness
         self.changed = True
 
+    def folds_by_bending(self, spring: int, min_area_ratio: float) -> bool:
+        """Whether the BEND spring (r, l) came short because its edge bends, not because the
+        solver crushed its two triangles: both keep ``min_area_ratio`` of their flat area."""
+        r, left = (int(x) for x in self.spring_vertices.data[spring])
+        hinge = _hinge_between(self, r, left)
+        if hinge is None:
+            return False
+        a, b = hinge
+        x = self.positions.data
+        for corner in (r, left):
+            area = 0.5 * float(np.linalg.norm(np.cross(x[b] - x[a], x[corner] - x[a])))
+            if area < min_area_ratio * self._material_area(a, b, corner):
+                return False
+        return True
+
     # -------------------------------------------------------------------------- commit
     def commit(self) -> None:
         """Write the edited arrays back into the sheet (new arrays, so views stay valid)."""
@@ -439,9 +459,9 @@ def breakable_springs(kind: np.ndarray, ends: np.ndarray, rest_length: np.ndarra
 class DamageModel:
     """Breaks and folds of one simulated sheet, at ``check_rate`` in simulated time.
 
-    ``observe_prediction`` is called by the solver before each stretch projection;
-    ``advance`` once per frame; ``crumple`` for random damage. Counters ``breaks`` and
-    ``folds`` count since construction.
+    ``advance`` is called once per frame, after the sub-steps, with the probes' motion in
+    that frame; ``crumple`` applies random damage. ``breaks``, ``folds`` and ``creases``
+    count since construction (the simulator builds a new model on reset).
     """
 
     def __init__(self, config: DamageConfig, seed: int, aux_stiffness: float,
@@ -546,7 +566,8 @@ class DamageModel:
                 break
             # a break may have moved this BEND spring's end: test it again
             threshold = config.fold_threshold * editor.rest_length.data[spring]
-            if editor.kind.data[spring] == BEND and editor.length(spring) < threshold:
+            if editor.kind.data[spring] == BEND and editor.length(spring) < threshold \
+                    and editor.folds_by_bending(spring, FOLD_MIN_AREA):
                 editor.fold(spring)
                 self.folds += 1
         editor.commit()
