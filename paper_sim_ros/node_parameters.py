@@ -71,7 +71,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'frame steps dt = 1 / physics_rate [Hz].', (1.0, 1000.0), read_only=True),
     ParameterSpec('publish_rate', 30.0, 'Rate of paper/points in simulated time [Hz]; 0: off.',
                   (0.0, 1000.0)),
-    ParameterSpec('markers_rate', 5.0, 'Rate of paper/markers in simulated time [Hz]; 0: off. '
+    ParameterSpec('markers_rate', 10.0, 'Rate of paper/markers in simulated time [Hz]; 0: off. '
                   'The largest output: about 1.6 MB a frame at 65 x 65 with the springs.',
                   (0.0, 1000.0)),
     ParameterSpec('diagnostics_rate', 1.0, 'Rate of /diagnostics in wall-clock time [Hz].',
