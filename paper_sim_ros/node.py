@@ -94,8 +94,12 @@ class Schedule:
     dropped: int = 0
 
     def take(self, sim_time: float, rate: float) -> bool:
-        """True if the output is due at ``sim_time``; skipped slots count as dropped."""
-        if rate <= 0 or sim_time + 1e-9 < self.next_time:
+        """True if the output is due at ``sim_time``; skipped slots count as dropped. While
+        the output is off (rate 0) nothing is due and nothing is dropped."""
+        if rate <= 0:
+            self.next_time = sim_time
+            return False
+        if sim_time + 1e-9 < self.next_time:
             return False
         period = 1.0 / rate
         missed = int((sim_time + 1e-9 - self.next_time) // period)
@@ -285,6 +289,12 @@ class PaperSimNode(Node):
                 self.simulator.topology_changed()
         if self._settings.pin_mode != previous.pin_mode:
             self._apply_pins()
+        if self._settings.publish_rate != previous.publish_rate:
+            self._points_schedule.next_time = min(self._points_schedule.next_time,
+                                                  self.simulator.time)
+        if self._settings.markers_rate != previous.markers_rate:
+            self._markers_schedule.next_time = min(self._markers_schedule.next_time,
+                                                   self.simulator.time)
         if self._settings.diagnostics_rate != previous.diagnostics_rate:
             self._start_diagnostics_timer()
         self.get_logger().info(f'parameters changed: {", ".join(sorted(changed))}')

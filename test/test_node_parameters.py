@@ -1,10 +1,13 @@
-"""The node's parameter table and its validation, without a node."""
+"""The node's parameter table, its validation and its scheduling, without a node."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import yaml
 
-from paper_sim_ros.core.config import SimulationConfig
+from paper_sim_ros.core.config import SheetConfig, SimulationConfig
+from paper_sim_ros.core.sheet import build_flat_sheet
+from paper_sim_ros.node import Schedule, pin_mask
 from paper_sim_ros.node_parameters import (PARAMETER_NAMES, PARAMETER_SPECS, PARAMETERS,
                                            settings_from_values)
 from ros_harness import CONFIG
@@ -92,3 +95,24 @@ def test_a_missing_parameter_is_named():
     del values['probe_timeout']
     with pytest.raises(ValueError, match='probe_timeout'):
         settings_from_values(values)
+
+
+def test_schedule_publishes_at_its_rate_and_counts_what_it_skips():
+    schedule = Schedule()
+    published = sum(schedule.take(frame / 60.0, 10.0) for frame in range(1, 60))
+    assert published == 10 and schedule.dropped == 0, 'slots 0.0, 0.1 ... 0.9 s'
+    assert schedule.take(2.0, 10.0), 'due after a jump'
+    assert schedule.dropped == 10, 'the slots 1.0 ... 1.9 s were dropped'
+    off = Schedule()
+    assert not any(off.take(frame / 60.0, 0.0) for frame in range(1, 600))
+    assert off.take(10.0, 10.0) and off.dropped == 0, 'an output that was off dropped nothing'
+
+
+def test_pin_mask_clamps_the_short_edge():
+    sheet = build_flat_sheet(SheetConfig(nx=5, ny=7))
+    assert not pin_mask(sheet, 'none').any()
+    mask = pin_mask(sheet, 'short_edge')
+    assert mask.sum() == 5
+    assert np.allclose(sheet.positions[mask, 1], sheet.height / 2)
+    with pytest.raises(ValueError):
+        pin_mask(sheet, 'corner')
