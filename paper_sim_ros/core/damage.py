@@ -137,6 +137,39 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
             compression[s] += shortening / rest_length[s]
 
 
+@njit(cache=True)
+def unit_vertex_normals(positions, triangles, normals):
+    """Area-weighted unit vertex normals into ``normals`` (+z where a vertex has no area)."""
+    normals[:, :] = 0.0
+    for t in range(triangles.shape[0]):
+        a = triangles[t, 0]
+        b = triangles[t, 1]
+        c = triangles[t, 2]
+        ux = positions[b, 0] - positions[a, 0]
+        uy = positions[b, 1] - positions[a, 1]
+        uz = positions[b, 2] - positions[a, 2]
+        vx = positions[c, 0] - positions[a, 0]
+        vy = positions[c, 1] - positions[a, 1]
+        vz = positions[c, 2] - positions[a, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        for v in (a, b, c):
+            normals[v, 0] += nx
+            normals[v, 1] += ny
+            normals[v, 2] += nz
+    for v in range(normals.shape[0]):
+        size = np.sqrt(normals[v, 0] ** 2 + normals[v, 1] ** 2 + normals[v, 2] ** 2)
+        if size < 1e-30:
+            normals[v, 0] = 0.0
+            normals[v, 1] = 0.0
+            normals[v, 2] = 1.0
+        else:
+            normals[v, 0] /= size
+            normals[v, 1] /= size
+            normals[v, 2] /= size
+
+
 def spring_lengths(positions: np.ndarray, spring_vertices: np.ndarray) -> np.ndarray:
     return np.linalg.norm(positions[spring_vertices[:, 1]] - positions[spring_vertices[:, 0]],
                           axis=1)
@@ -190,14 +223,8 @@ class MeshEditor:
         self.stiffness = _Rows(sheet.spring_stiffness)
         self.damping = _Rows(sheet.spring_damping)
         self.kind = _Rows(sheet.spring_kind)
-        self.normals = _Rows(vertex_normals(sheet.positions, sheet.triangles))
-        # material area of the triangles around each vertex (the lumping rule's fan)
-        corner = sheet.material[sheet.triangles]
-        area = 0.5 * np.abs(_cross_2d(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]))
-        fan = np.zeros(sheet.vertex_count)
-        for k in range(3):
-            np.add.at(fan, sheet.triangles[:, k], area)
-        self.fan_area = _Rows(fan)
+        self._normals: _Rows | None = None
+        self._fan_area: _Rows | None = None
         self.changed = False
         self.creases: list[tuple[int, int, int]] = []
         """(i, m, j) of every break made by this editor: the ridge vertex between its ends."""
@@ -205,6 +232,29 @@ class MeshEditor:
     @property
     def vertex_count(self) -> int:
         return self.positions.count
+
+    @property
+    def normals(self) -> _Rows:
+        """Unit vertex normals (computed when first needed: a fold needs none)."""
+        if self._normals is None:
+            count = self.positions.count
+            normals = np.empty((count, 3))
+            unit_vertex_normals(self.positions.data[:count],
+                                self.triangles.data[:self.triangles.count], normals)
+            self._normals = _Rows(normals)
+        return self._normals
+
+    @property
+    def fan_area(self) -> _Rows:
+        """Material area of the triangles around each vertex (the lumping rule's fan)."""
+        if self._fan_area is None:
+            triangles = self.triangles.data[:self.triangles.count]
+            corner = self.material.data[triangles]
+            area = 0.5 * np.abs(_cross_2d(corner[:, 1] - corner[:, 0],
+                                          corner[:, 2] - corner[:, 0]))
+            self._fan_area = _Rows(np.bincount(triangles.ravel(), np.repeat(area, 3),
+                                               minlength=self.positions.count))
+        return self._fan_area
 
     # ------------------------------------------------------------------------- queries
     def edge_triangles(self, a: int, b: int) -> list[int]:
@@ -489,8 +539,10 @@ class DamageModel:
         active = probes.active
         if not np.any(active):
             return
+        normals = np.empty_like(sheet.positions)
+        unit_vertex_normals(sheet.positions, sheet.triangles, normals)
         accumulate_probe_compression(
-            sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
+            sheet.positions, normals,
             sheet.spring_vertices, sheet.spring_rest_length,
             np.flatnonzero(sheet.spring_kind == HINGE),
             np.ascontiguousarray(probes.start[active]), np.ascontiguousarray(probes.end[active]),
@@ -570,8 +622,9 @@ class DamageModel:
                     and editor.folds_by_bending(spring, FOLD_MIN_AREA):
                 editor.fold(spring)
                 self.folds += 1
-        editor.commit()
-        self.creases += editor.creases
+        if editor.changed:
+            editor.commit()
+            self.creases += editor.creases
         return editor.changed
 
     def _at_cap(self, vertex_count: int) -> bool:
@@ -650,9 +703,16 @@ class DamageModel:
 def _hinge_between(editor: MeshEditor, r: int, left: int) -> tuple[int, int] | None:
     """The edge (a, b) with triangles (a, b, r) and (b, a, l) on its two sides."""
     triangles = editor.triangles.data[:editor.triangles.count]
-    for t in np.flatnonzero(np.any(triangles == r, axis=1)).tolist():
-        a, b = (int(c) for c in triangles[t] if c != r)
-        if any(left in triangles[u] for u in editor.edge_triangles(a, b)):
+
+    def around(vertex: int) -> list[set[int]]:
+        rows = np.flatnonzero((triangles[:, 0] == vertex) | (triangles[:, 1] == vertex)
+                              | (triangles[:, 2] == vertex))
+        return [set(triangles[t].tolist()) - {vertex} for t in rows]
+
+    far_edges = around(left)
+    for edge in around(r):
+        if edge in far_edges:
+            a, b = sorted(edge)
             return a, b
     return None
 
