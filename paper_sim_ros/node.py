@@ -378,14 +378,19 @@ class PaperSimNode(Node):
             self._stats.window_slipped += slipped
             due = limit
         centers, radii, active = self._probe_state(now)
-        try:
-            simulator.set_probes(centers, radii, active)
-        except ValueError as error:
-            self.get_logger().warn(f'probes ignored this frame: {error}',
-                                   throttle_duration_sec=WARN_EVERY)
-            simulator.set_probes(centers, radii, np.zeros_like(active))
+        previous = simulator.probes
+        # a probe that was already acting moves to its new pose evenly over the frames of
+        # this tick (instead of jumping in the first one) when the tick catches up
+        moving = active & previous.active if previous.count == len(active) \
+            else np.zeros_like(active)
         stats = self._stats
         for frame in range(due):
+            frame_centers = centers.copy()
+            if moving.any():
+                share = (frame + 1) / due
+                frame_centers[moving] = previous.end[moving] + share * (
+                    centers[moving] - previous.end[moving])
+            self._set_probes(frame_centers, radii, active)
             started = time.perf_counter()
             simulator.step_frame()
             seconds = time.perf_counter() - started
@@ -398,6 +403,14 @@ class PaperSimNode(Node):
             if self._recorder is not None and frame < due - 1:
                 self._recorder.log_inputs(self._recording_time(), simulator)
         self._publish()
+
+    def _set_probes(self, centers: np.ndarray, radii: np.ndarray, active: np.ndarray) -> None:
+        try:
+            self.simulator.set_probes(centers, radii, active)
+        except ValueError as error:  # poses are checked on arrival: a core limit changed
+            self.get_logger().warn(f'probes ignored this frame: {error}',
+                                   throttle_duration_sec=WARN_EVERY)
+            self.simulator.set_probes(centers, radii, np.zeros_like(active))
 
     def _recording_time(self) -> float:
         """Seconds simulated since the node started, across resets (Rerun timeline)."""
