@@ -137,39 +137,6 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
             compression[s] += shortening / rest_length[s]
 
 
-@njit(cache=True)
-def unit_vertex_normals(positions, triangles, normals):
-    """Area-weighted unit vertex normals into ``normals`` (+z where a vertex has no area)."""
-    normals[:, :] = 0.0
-    for t in range(triangles.shape[0]):
-        a = triangles[t, 0]
-        b = triangles[t, 1]
-        c = triangles[t, 2]
-        ux = positions[b, 0] - positions[a, 0]
-        uy = positions[b, 1] - positions[a, 1]
-        uz = positions[b, 2] - positions[a, 2]
-        vx = positions[c, 0] - positions[a, 0]
-        vy = positions[c, 1] - positions[a, 1]
-        vz = positions[c, 2] - positions[a, 2]
-        nx = uy * vz - uz * vy
-        ny = uz * vx - ux * vz
-        nz = ux * vy - uy * vx
-        for v in (a, b, c):
-            normals[v, 0] += nx
-            normals[v, 1] += ny
-            normals[v, 2] += nz
-    for v in range(normals.shape[0]):
-        size = np.sqrt(normals[v, 0] ** 2 + normals[v, 1] ** 2 + normals[v, 2] ** 2)
-        if size < 1e-30:
-            normals[v, 0] = 0.0
-            normals[v, 1] = 0.0
-            normals[v, 2] = 1.0
-        else:
-            normals[v, 0] /= size
-            normals[v, 1] /= size
-            normals[v, 2] /= size
-
-
 def spring_lengths(positions: np.ndarray, spring_vertices: np.ndarray) -> np.ndarray:
     return np.linalg.norm(positions[spring_vertices[:, 1]] - positions[spring_vertices[:, 0]],
                           axis=1)
@@ -237,11 +204,8 @@ class MeshEditor:
     def normals(self) -> _Rows:
         """Unit vertex normals (computed when first needed: a fold needs none)."""
         if self._normals is None:
-            count = self.positions.count
-            normals = np.empty((count, 3))
-            unit_vertex_normals(self.positions.data[:count],
-                                self.triangles.data[:self.triangles.count], normals)
-            self._normals = _Rows(normals)
+            self._normals = _Rows(vertex_normals(self.positions.data[:self.positions.count],
+                                                 self.triangles.data[:self.triangles.count]))
         return self._normals
 
     @property
@@ -539,10 +503,8 @@ class DamageModel:
         active = probes.active
         if not np.any(active):
             return
-        normals = np.empty_like(sheet.positions)
-        unit_vertex_normals(sheet.positions, sheet.triangles, normals)
         accumulate_probe_compression(
-            sheet.positions, normals,
+            sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
             sheet.spring_vertices, sheet.spring_rest_length,
             np.flatnonzero(sheet.spring_kind == HINGE),
             np.ascontiguousarray(probes.start[active]), np.ascontiguousarray(probes.end[active]),

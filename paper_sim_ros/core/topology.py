@@ -1,10 +1,12 @@
 """Triangle-mesh topology: edges, their opposite vertices, and validity checks (SPEC §4.4).
 
-Pure numpy; used when a sheet is built and whenever damage changes the mesh.
+numpy, and one numba kernel (vertex normals, needed every frame by damage and display);
+used when a sheet is built and whenever damage changes the mesh.
 """
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 NO_VERTEX = -1
 """Marks the missing opposite vertex of a border edge (topology tables only, never kernels)."""
@@ -46,17 +48,44 @@ def mesh_edges(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np
 
 
 def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (unit +z where a vertex has no area)."""
-    corner = positions[triangles]
-    face = np.cross(corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0])
-    normals = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], face)
-    length = np.linalg.norm(normals, axis=1)
-    flat = length < 1e-30
-    normals[flat] = (0.0, 0.0, 1.0)
-    length[flat] = 1.0
-    return normals / length[:, None]
+    """(V, 3) area-weighted unit vertex normals (unit +z where a vertex has no area)."""
+    normals = np.empty((positions.shape[0], 3))
+    _unit_vertex_normals(np.ascontiguousarray(positions, dtype=np.float64),
+                         np.ascontiguousarray(triangles), normals)
+    return normals
+
+
+@njit(cache=True)
+def _unit_vertex_normals(positions, triangles, normals):
+    """Area-weighted unit vertex normals into ``normals`` (+z where a vertex has no area)."""
+    normals[:, :] = 0.0
+    for t in range(triangles.shape[0]):
+        a = triangles[t, 0]
+        b = triangles[t, 1]
+        c = triangles[t, 2]
+        ux = positions[b, 0] - positions[a, 0]
+        uy = positions[b, 1] - positions[a, 1]
+        uz = positions[b, 2] - positions[a, 2]
+        vx = positions[c, 0] - positions[a, 0]
+        vy = positions[c, 1] - positions[a, 1]
+        vz = positions[c, 2] - positions[a, 2]
+        nx = uy * vz - uz * vy
+        ny = uz * vx - ux * vz
+        nz = ux * vy - uy * vx
+        for v in (a, b, c):
+            normals[v, 0] += nx
+            normals[v, 1] += ny
+            normals[v, 2] += nz
+    for v in range(normals.shape[0]):
+        size = np.sqrt(normals[v, 0] ** 2 + normals[v, 1] ** 2 + normals[v, 2] ** 2)
+        if size < 1e-30:
+            normals[v, 0] = 0.0
+            normals[v, 1] = 0.0
+            normals[v, 2] = 1.0
+        else:
+            normals[v, 0] /= size
+            normals[v, 1] /= size
+            normals[v, 2] /= size
 
 
 def check_mesh(triangles: np.ndarray, vertex_count: int, positions: np.ndarray,
