@@ -186,7 +186,7 @@ def default_blueprint(center: np.ndarray | None = None, size: float | None = Non
     eye = None
     if center is not None and size:
         eye = rrb.EyeControls3D(position=tuple(np.asarray(center) + size * np.array(
-            [0.4, -0.75, 0.55])), look_target=tuple(center), eye_up=(0.0, 0.0, 1.0))
+            [0.45, -0.85, 0.62])), look_target=tuple(center), eye_up=(0.0, 0.0, 1.0))
     view_3d = rrb.Spatial3DView(
         name='sheet', origin='/paper',
         contents=['+ /paper/mesh', '+ /paper/springs/**', '+ /paper/probes'],
