@@ -150,6 +150,62 @@ def test_several_probes_each_on_its_topic(tmp_path):
         stop_cleanly(process)
 
 
+def clock_message(seconds: float) -> Clock:
+    message = Clock()
+    message.clock.sec = int(seconds)
+    message.clock.nanosec = int(round((seconds - int(seconds)) * 1e9))
+    return message
+
+
+def test_a_catching_up_tick_moves_the_probe_evenly(tmp_path):
+    """/clock advances four frames at a time while the probe pose moves 4 cm each time: the
+    recorded input of every frame (Rerun) has the probe 1 cm further, not 4 cm then 0."""
+    recording = tmp_path / 'catch_up.rrd'
+    domain = new_domain_id()
+    process = start_node(tmp_path, {**SMALL, 'use_sim_time': True, 'max_catchup_frames': 8,
+                                    'probe_timeout': 30.0, 'rerun_path': str(recording)},
+                         domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        clock = client.node.create_publisher(Clock, '/clock', 10)
+        poses = client.node.create_publisher(PoseStamped, 'probe/pose', 10)
+        start, frame = 100.0, 1.0 / 60.0
+        ticks = [0]
+
+        def advance():
+            # the pose first, then the clock that makes the node step four frames to it
+            pose = PoseStamped()
+            pose.header.frame_id = 'world'
+            pose.pose.position.x = 0.04 * ticks[0] - 0.1
+            pose.pose.position.z = 0.2
+            pose.pose.orientation.w = 1.0
+            poses.publish(pose)
+            client.spin_for(0.03)
+            ticks[0] += 1
+            clock.publish(clock_message(start + 4 * frame * ticks[0]))
+            client.spin_for(0.03)
+        client.spin_until(lambda: client.node.count_subscribers('/clock') >= 1
+                          and client.node.count_subscribers('probe/pose') >= 1, 60,
+                          'the node to subscribe to /clock and probe/pose', process)
+        for _ in range(3):  # the first tick on /clock sets the simulation's clock origin
+            clock.publish(clock_message(start))
+            client.spin_for(0.2)
+        for _ in range(6):
+            advance()
+    finally:
+        client.close()
+        stop_cleanly(process)
+    from paper_sim_ros.rerun_replay import read_probe_inputs
+    inputs = [item for item in read_probe_inputs(str(recording)) if item.active.any()]
+    assert len(inputs) >= 16, f'only {len(inputs)} frames with the probe recorded'
+    steps = np.diff([item.centers[0, 0] for item in inputs])
+    # the first pose puts the probe there for the four frames of its tick; then it moves
+    np.testing.assert_allclose(steps[:3], 0.0, atol=1e-12)
+    np.testing.assert_allclose(steps[3:], 0.01, atol=1e-9,
+                               err_msg='the probe jumped instead of moving a cm a frame')
+
+
 def test_use_sim_time_follows_clock(tmp_path):
     """With use_sim_time the node steps only while /clock advances, and stamps its outputs
     with /clock time."""
