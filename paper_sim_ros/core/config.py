@@ -179,7 +179,8 @@ class DamageConfig:
                  and 0 <= self.fold_threshold < 1,
                  f'fold_threshold must be in [0, 1), got {self.fold_threshold!r}')
         _finite_positive('check_rate', self.check_rate)
-        _require(self.check_rate <= 10000, f'check_rate must be <= 10000 Hz, got {self.check_rate}')
+        _require(self.check_rate <= 10000,
+                 f'check_rate must be <= 10000 Hz, got {self.check_rate}')
         _require(isinstance(self.compression_floor, (int, float))
                  and 0 <= self.compression_floor < 1,
                  f'compression_floor must be in [0, 1), got {self.compression_floor!r}')
