@@ -159,6 +159,22 @@ def test_recording_is_self_describing(pinch_recording):
         np.testing.assert_array_equal(item.active, active)
 
 
+def test_paper_texture_is_static_and_texture_coordinates_follow_the_mesh(pinch_recording):
+    path, truth = pinch_recording
+    static = [c.to_record_batch() for c in chunks_of(path, 'paper/mesh') if c.is_static]
+    assert any('Mesh3D:albedo_texture_buffer' in batch.schema.names for batch in static)
+    for static_batch in static:
+        assert 'Mesh3D:vertex_positions' not in static_batch.schema.names
+    for chunk in chunks_of(path, 'paper/mesh'):
+        batch = chunk.to_record_batch()
+        if chunk.is_static or 'Mesh3D:triangle_indices' not in batch.schema.names:
+            continue
+        for row in range(batch.num_rows):
+            if batch.column('Mesh3D:triangle_indices')[row].is_valid:
+                assert len(batch.column('Mesh3D:vertex_texcoords')[row]) \
+                    == len(batch.column('Mesh3D:vertex_positions')[row])
+
+
 def test_springs_and_probes_are_logged(pinch_recording):
     path, truth = pinch_recording
     for entity in ('paper/springs/hinge', 'paper/springs/aux', 'paper/probes'):
