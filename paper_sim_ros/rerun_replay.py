@@ -11,6 +11,12 @@ vertices, the hash of the initial sheet) and the exact probe inputs of every fra
 rebuilt simulation has the recorded configuration and initial sheet, and steps it with the
 recorded probe inputs in place of the scenario's keyframe tracks; with the same seed the final
 positions hash equals the original run's (``final_positions_sha256`` in the metrics).
+
+A session without a scenario (the node's) is rebuilt from its recorded ``SimulationConfig`` and
+pinned vertices instead. Not replayable, and refused with the reason: a session that was reset
+part-way (the frame counter restarts), and one whose initial sheet cannot be rebuilt from the
+recorded parameters (checked by hash). Inputs that do not pass through the probes (a crumple
+service call in the middle of a node session) are not recorded, so such a replay diverges.
 """
 from __future__ import annotations
 
