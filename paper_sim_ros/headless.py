@@ -138,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         from .rerun_replay import replay_command
         return replay_command(args)
     recorder = None
+    # from here on SIGTERM unwinds like Ctrl-C, so a recording is always closed
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     try:
         mapping = with_overrides(load_scenario_mapping(args.scenario), grid=args.grid,
                                  duration=args.duration, dt=args.dt, substeps=args.substeps,
@@ -146,10 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             mapping['damage'] = {**(mapping.get('damage') or {}), 'enabled': False}
         scenario = scenario_from_mapping(mapping)
         simulator = build_simulator(scenario)
-        if args.metrics_json:
-            directory = os.path.dirname(os.path.abspath(args.metrics_json))
-            if not os.access(directory, os.W_OK):
-                raise ValueError(f'cannot write metrics to {args.metrics_json}')
+        check_metrics_path(args.metrics_json)
         on_frame = None
         if args.rrd:
             from .rerun_logger import RerunRecorder
@@ -158,8 +157,14 @@ def main(argv: list[str] | None = None) -> int:
             on_frame = _recording_callback(recorder, scenario.config.solver.dt)
     except (ValueError, OSError) as error:
         print(f'paper_sim_headless: error: {error}', file=sys.stderr)
+        if recorder is not None:
+            recorder.close()
         return 2
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    except KeyboardInterrupt:
+        print('paper_sim_headless: interrupted', file=sys.stderr)
+        if recorder is not None:
+            recorder.close()
+        return 130
     try:
         warm_up()
         metrics = run_scenario(scenario, on_frame=on_frame, simulator=simulator)
@@ -169,12 +174,23 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if recorder is not None:
             recorder.close()
+    emit_metrics(metrics, args.metrics_json)
+    return 0
+
+
+def check_metrics_path(path: str | None) -> None:
+    """Refuse, before running, a metrics file that could not be written."""
+    if path and not os.access(os.path.dirname(os.path.abspath(path)), os.W_OK):
+        raise ValueError(f'cannot write metrics to {path}')
+
+
+def emit_metrics(metrics: dict, path: str | None) -> None:
+    """Print the metrics as JSON, and write them to ``path`` if given."""
     text = json.dumps(metrics, indent=2)
-    if args.metrics_json:
-        with open(args.metrics_json, 'w', encoding='utf-8') as stream:
+    if path:
+        with open(path, 'w', encoding='utf-8') as stream:
             stream.write(text + '\n')
     print(text)
-    return 0
 
 
 if __name__ == '__main__':

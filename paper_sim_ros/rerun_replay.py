@@ -409,7 +409,7 @@ def replay_command(args) -> int:
     import signal
     import sys
 
-    from .headless import _raise_keyboard_interrupt
+    from .headless import _raise_keyboard_interrupt, check_metrics_path, emit_metrics
 
     # every other option would change the run the recording describes
     overrides = [f'--{name.replace("_", "-")}' for name, value in sorted(vars(args).items())
@@ -421,10 +421,7 @@ def replay_command(args) -> int:
                              f'recording; it cannot be combined with {", ".join(overrides)}')
         if not os.path.isfile(args.replay):
             raise ValueError(f'no such recording: {args.replay}')
-        if args.metrics_json:
-            directory = os.path.dirname(os.path.abspath(args.metrics_json))
-            if not os.access(directory, os.W_OK):
-                raise ValueError(f'cannot write metrics to {args.metrics_json}')
+        check_metrics_path(args.metrics_json)
         if args.rrd:
             check_writable_rrd(args.rrd)
         signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
@@ -435,9 +432,5 @@ def replay_command(args) -> int:
     except KeyboardInterrupt:
         print('paper_sim_headless: interrupted', file=sys.stderr)
         return 130
-    text = json.dumps(metrics, indent=2)
-    if args.metrics_json:
-        with open(args.metrics_json, 'w', encoding='utf-8') as stream:
-            stream.write(text + '\n')
-    print(text)
+    emit_metrics(metrics, args.metrics_json)
     return 0

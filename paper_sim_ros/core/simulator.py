@@ -324,14 +324,21 @@ class Simulator:
                                             sheet.spring_rest_length, sheet.spring_kind, HINGE))
 
     def energy(self) -> float:
-        """Kinetic + gravitational + elastic energy [J]."""
+        """Kinetic + gravitational + elastic energy [J]. The elastic part counts the
+        springs that act as forces: every spring for 'paper' and 'explicit', the BEND
+        springs for 'constrained', whose held springs are inextensible (their slack within
+        the strain band stores nothing)."""
         sheet = self.sheet
         gravity = np.asarray(self.config.solver.gravity)
         kinetic = 0.5 * np.sum(sheet.vertex_mass * np.sum(sheet.velocities ** 2, axis=1))
         potential = -np.sum(sheet.vertex_mass * (sheet.positions @ gravity))
-        ends = sheet.spring_vertices
+        elastic_springs = np.ones(sheet.spring_count, dtype=bool)
+        if self.config.solver.method == 'constrained':
+            elastic_springs[self._constraint_springs] = False
+        ends = sheet.spring_vertices[elastic_springs]
         length = np.linalg.norm(sheet.positions[ends[:, 1]] - sheet.positions[ends[:, 0]], axis=1)
-        elastic = 0.5 * np.sum(sheet.spring_stiffness * (length - sheet.spring_rest_length) ** 2)
+        stretch = length - sheet.spring_rest_length[elastic_springs]
+        elastic = 0.5 * np.sum(sheet.spring_stiffness[elastic_springs] * stretch ** 2)
         return float(kinetic + potential + elastic)
 
     def max_probe_penetration(self) -> float:
