@@ -21,10 +21,13 @@ from .kernels import EPSILON_LENGTH
 
 
 @njit(cache=True)
-def local_targets(positions, spring_vertices, rest_length, weight, in_matrix, rhs):
-    """The springs' part of the global step's right-hand side: k_s A_sᵀ d_s for every
-    spring, and for a spring left out of the matrix (``in_matrix`` false, the soft BEND
-    springs; see GlobalStep) also -k_s A_sᵀ A_s x at the current iterate."""
+def local_targets(positions, weighted_inertia, spring_vertices, rest_length, weight,
+                  in_matrix, rhs):
+    """The global step's right-hand side into ``rhs``: M y / h² (``weighted_inertia``) plus
+    k_s A_sᵀ d_s for every spring, and for a spring left out of the matrix (``in_matrix``
+    false, the soft BEND springs; see GlobalStep) also -k_s A_sᵀ A_s x at the current
+    iterate."""
+    rhs[:, :] = weighted_inertia
     for s in range(spring_vertices.shape[0]):
         i = spring_vertices[s, 0]
         j = spring_vertices[s, 1]
@@ -47,16 +50,26 @@ def local_targets(positions, spring_vertices, rest_length, weight, in_matrix, rh
 @njit(cache=True)
 def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upper_pointer,
                     upper_index, upper_value, upper_diagonal, row_permutation,
-                    column_permutation, free, rhs, positions, work):
-    """positions[free] ← A⁻¹ rhs[free] from SuperLU's Pr A Pc = L U. The factors are in
-    CSC with their diagonals held apart (``*_diagonal``), so each loop streams once."""
+                    column_permutation, coupling_pointer, coupling_index, coupling_value,
+                    free, rhs, positions, work):
+    """positions[free] ← A⁻¹ (rhs - A_fp x_p)[free] from SuperLU's Pr A Pc = L U. The
+    factors are in CSC with their diagonals held apart (``*_diagonal``), so each loop
+    streams once; A_fp (free rows × pinned vertices) is in CSR (``coupling_*``)."""
     count = free.shape[0]
     for k in range(count):
         v = free[k]
         row = row_permutation[k]
-        work[row, 0] = rhs[v, 0]
-        work[row, 1] = rhs[v, 1]
-        work[row, 2] = rhs[v, 2]
+        b0 = rhs[v, 0]
+        b1 = rhs[v, 1]
+        b2 = rhs[v, 2]
+        for c in range(coupling_pointer[k], coupling_pointer[k + 1]):
+            p = coupling_index[c]
+            b0 -= coupling_value[c] * positions[p, 0]
+            b1 -= coupling_value[c] * positions[p, 1]
+            b2 -= coupling_value[c] * positions[p, 2]
+        work[row, 0] = b0
+        work[row, 1] = b1
+        work[row, 2] = b2
     for column in range(count):  # L z = Pr b, column oriented
         scale = 1.0 / lower_diagonal[column]
         z0 = work[column, 0] * scale
@@ -106,6 +119,20 @@ def _split_diagonal(matrix) -> tuple:
     return (off.indptr.astype(np.int32), off.indices.astype(np.int32), off.data, diagonal)
 
 
+@njit(cache=True)
+def inertial_step(positions, velocities, pinned, mass, h, air_damping, gravity,
+                  weighted_inertia):
+    """y = x + h (1 - h·air) v + h² g for free vertices (pinned ones stay), written into
+    ``positions`` as the starting iterate, and M y / h² into ``weighted_inertia``."""
+    damping = h * (1.0 - h * air_damping)
+    for v in range(positions.shape[0]):
+        scale = mass[v] / (h * h)
+        for axis in range(3):
+            if not pinned[v]:
+                positions[v, axis] += damping * velocities[v, axis] + h * h * gravity[axis]
+            weighted_inertia[v, axis] = scale * positions[v, axis]
+
+
 class GlobalStep:
     """The prefactored global step for one mesh, pin set and sub-step length."""
 
@@ -130,7 +157,9 @@ class GlobalStep:
         self.free = np.flatnonzero(~pinned).astype(np.int64)
         self.pinned = np.flatnonzero(pinned).astype(np.int64)
         # pinned vertices are not unknowns: their couplings go to the right-hand side
-        self._pinned_coupling = system[self.free][:, self.pinned].tocsr()
+        coupling = system[self.free][:, self.pinned].tocsr()
+        self._coupling = (coupling.indptr.astype(np.int64),
+                          self.pinned[coupling.indices].astype(np.int64), coupling.data)
         reduced = system[self.free][:, self.free].tocsc()
         # symmetric positive definite: no pivoting needed, minimum degree on Aᵀ + A
         factor = sparse_linalg.splu(reduced, permc_spec='MMD_AT_PLUS_A',
@@ -142,8 +171,6 @@ class GlobalStep:
         self.factor_size = int(factor.L.nnz + factor.U.nnz)
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
-        """Overwrite the free vertices of ``positions`` with the global step's solution
-        (``rhs`` is consumed)."""
-        if self.pinned.size:
-            rhs[self.free] -= self._pinned_coupling @ positions[self.pinned]
-        _solve_factored(*self._factors, self.free, rhs, positions, self._work)
+        """Overwrite the free vertices of ``positions`` with the global step's solution."""
+        _solve_factored(*self._factors, *self._coupling, self.free, rhs, positions,
+                        self._work)

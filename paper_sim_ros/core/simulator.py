@@ -25,7 +25,7 @@ import numpy as np
 from . import kernels
 from .config import SimulationConfig
 from .damage import DamageModel
-from .projective import GlobalStep, local_targets
+from .projective import GlobalStep, inertial_step, local_targets
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet
 
 NEAR_PIN_LEVELS = 10
@@ -248,18 +248,17 @@ class Simulator:
         aged sheet its waviness); the strain band is then enforced by _limit_strain."""
         sheet = self.sheet
         solver = self.config.solver
-        positions, velocities, mass = sheet.positions, sheet.velocities, sheet.vertex_mass
-        free = ~sheet.pinned
-        inertia = positions + h * (1.0 - h * solver.air_damping) * velocities
-        inertia[free] += h * h * np.asarray(solver.gravity)
-        positions[free] = inertia[free]
+        positions = sheet.positions
+        weighted_inertia = np.empty_like(positions)
+        inertial_step(positions, sheet.velocities, sheet.pinned, sheet.vertex_mass, h,
+                      solver.air_damping, np.asarray(solver.gravity, dtype=np.float64),
+                      weighted_inertia)
         if self._global_step is None:
             return
-        weighted_inertia = (mass / (h * h))[:, None] * inertia
+        rhs = np.empty_like(positions)
         for _ in range(solver.projective_iterations):
-            rhs = weighted_inertia.copy()
-            local_targets(positions, sheet.spring_vertices, sheet.spring_rest_length,
-                          self._global_weight, self._in_matrix, rhs)
+            local_targets(positions, weighted_inertia, sheet.spring_vertices,
+                          sheet.spring_rest_length, self._global_weight, self._in_matrix, rhs)
             self._global_step.solve(rhs, positions)
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
