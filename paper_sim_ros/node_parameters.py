@@ -111,6 +111,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'Jacobi iterations of Eq. 6 per sub-step.', (0, 100000)),
     ParameterSpec('solver.constraint_iterations', _SOLVER.constraint_iterations,
                   "Strain-limiting sweeps per sub-step ('constrained' method).", (0, 10000)),
+    ParameterSpec('solver.projective_iterations', _SOLVER.projective_iterations,
+                  "Local/global iterations per sub-step ('constrained' method).", (0, 1000)),
+    ParameterSpec('solver.global_stiffness', _SOLVER.global_stiffness,
+                  "Weight of the held springs in the global step [N/m] ('constrained'; a "
+                  'solver weight, not the material stiffness).', (1.0e-3, 1.0e9)),
     ParameterSpec('contact.ground_enabled', True, 'A table (ground plane) under the sheet.'),
     ParameterSpec('contact.ground_height', 0.0, 'Height of the table [m].', (-100.0, 100.0)),
     ParameterSpec('contact.ground_friction', _CONTACT.ground_friction,
