@@ -282,11 +282,7 @@ class PaperSimNode(Node):
         previous = self._settings
         self._settings = settings_from_values(self._values)
         if self._settings.simulation != previous.simulation:
-            # contact settings are read by every step; what the simulator derives from the
-            # solver settings (the sub-step length, say) is rebuilt by topology_changed()
-            self.simulator.config = self._settings.simulation
-            if self._settings.simulation.solver != previous.simulation.solver:
-                self.simulator.topology_changed()
+            self.simulator.reconfigure(self._settings.simulation)
         if self._settings.pin_mode != previous.pin_mode:
             self._apply_pins()
         if self._settings.publish_rate != previous.publish_rate:

@@ -70,6 +70,15 @@ class Simulator:
             held_inextensible=self.config.solver.method == 'constrained')
         self.topology_changed()
 
+    def reconfigure(self, config: SimulationConfig) -> None:
+        """Run on with new settings, the state untouched: contact and solver settings take
+        effect at the next frame (what the solver derives from them is rebuilt); sheet
+        and damage settings apply from the next reset."""
+        solver_changed = config.solver != self.config.solver
+        self.config = config
+        if solver_changed:
+            self.topology_changed()
+
     def set_pinned(self, pinned: np.ndarray) -> None:
         """Pin (fix in place) the vertices where ``pinned`` is true."""
         pinned = np.asarray(pinned, dtype=bool)
