@@ -108,15 +108,17 @@ def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upp
 
 def _split_diagonal(matrix) -> tuple:
     """CSC arrays of the strictly off-diagonal part (int32 indices) and the diagonal."""
-    matrix = matrix.tocoo()
-    on_diagonal = matrix.row == matrix.col
-    diagonal = np.ones(matrix.shape[0])
-    diagonal[matrix.row[on_diagonal]] = matrix.data[on_diagonal]
-    off = sparse.csc_matrix((matrix.data[~on_diagonal],
-                             (matrix.row[~on_diagonal], matrix.col[~on_diagonal])),
-                            shape=matrix.shape)
-    off.sort_indices()
-    return (off.indptr.astype(np.int32), off.indices.astype(np.int32), off.data, diagonal)
+    matrix = matrix.tocsc()
+    matrix.sort_indices()
+    size = matrix.shape[0]
+    column = np.repeat(np.arange(size), np.diff(matrix.indptr))
+    on_diagonal = matrix.indices == column
+    diagonal = np.ones(size)
+    diagonal[column[on_diagonal]] = matrix.data[on_diagonal]
+    kept = ~on_diagonal
+    pointer = np.zeros(size + 1, dtype=np.int32)
+    np.cumsum(np.bincount(column[kept], minlength=size), out=pointer[1:])
+    return (pointer, matrix.indices[kept].astype(np.int32), matrix.data[kept], diagonal)
 
 
 @njit(cache=True)
