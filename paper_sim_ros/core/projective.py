@@ -48,6 +48,28 @@ def local_targets(positions, weighted_inertia, spring_vertices, rest_length, wei
 
 
 @njit(cache=True)
+def _substitute(pointer, index, value, diagonal, backward, work):
+    """Column-oriented triangular solve in place on the three columns of ``work``: the
+    factor in CSC without its diagonal, lower (forward) or upper (``backward``)."""
+    count = diagonal.shape[0]
+    for step in range(count):
+        column = count - 1 - step if backward else step
+        scale = 1.0 / diagonal[column]
+        z0 = work[column, 0] * scale
+        z1 = work[column, 1] * scale
+        z2 = work[column, 2] * scale
+        work[column, 0] = z0
+        work[column, 1] = z1
+        work[column, 2] = z2
+        for p in range(pointer[column], pointer[column + 1]):
+            row = index[p]
+            entry = value[p]
+            work[row, 0] -= entry * z0
+            work[row, 1] -= entry * z1
+            work[row, 2] -= entry * z2
+
+
+@njit(cache=True)
 def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upper_pointer,
                     upper_index, upper_value, upper_diagonal, row_permutation,
                     column_permutation, coupling_pointer, coupling_index, coupling_value,
@@ -70,34 +92,8 @@ def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upp
         work[row, 0] = b0
         work[row, 1] = b1
         work[row, 2] = b2
-    for column in range(count):  # L z = Pr b, column oriented
-        scale = 1.0 / lower_diagonal[column]
-        z0 = work[column, 0] * scale
-        z1 = work[column, 1] * scale
-        z2 = work[column, 2] * scale
-        work[column, 0] = z0
-        work[column, 1] = z1
-        work[column, 2] = z2
-        for p in range(lower_pointer[column], lower_pointer[column + 1]):
-            row = lower_index[p]
-            value = lower_value[p]
-            work[row, 0] -= value * z0
-            work[row, 1] -= value * z1
-            work[row, 2] -= value * z2
-    for column in range(count - 1, -1, -1):  # U w = z
-        scale = 1.0 / upper_diagonal[column]
-        z0 = work[column, 0] * scale
-        z1 = work[column, 1] * scale
-        z2 = work[column, 2] * scale
-        work[column, 0] = z0
-        work[column, 1] = z1
-        work[column, 2] = z2
-        for p in range(upper_pointer[column], upper_pointer[column + 1]):
-            row = upper_index[p]
-            value = upper_value[p]
-            work[row, 0] -= value * z0
-            work[row, 1] -= value * z1
-            work[row, 2] -= value * z2
+    _substitute(lower_pointer, lower_index, lower_value, lower_diagonal, False, work)  # L z = Pr b
+    _substitute(upper_pointer, upper_index, upper_value, upper_diagonal, True, work)  # U w = z
     for k in range(count):  # x = Pc w
         source = column_permutation[k]
         v = free[k]
