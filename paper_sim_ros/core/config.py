@@ -84,9 +84,9 @@ class SolverConfig:
     """Integration sub-steps per frame."""
     jacobi_iterations: int = 10
     """Jacobi iterations of Eq. 6 per sub-step ('paper')."""
-    projective_iterations: int = 2
+    projective_iterations: int = 3
     """Local/global iterations per sub-step ('constrained')."""
-    global_stiffness: float = 200.0
+    global_stiffness: float = 600.0
     """Weight [N/m] of the held springs in the global step ('constrained'). It is a solver
     weight, not the material's E·t: the strain band, not this, holds paper inextensible;
     far larger weights lock the sheet's rotation in few iterations."""
