@@ -266,8 +266,8 @@ def level_seams_picture(out: Path) -> None:
     ``level_surface``: the patch seams show as straight lines in the light."""
     config = SheetConfig(nx=129, ny=129)
     sheet = build_aged_sheet(config, 0.01, None, seed=2)
-    appearance = PaperAppearance(AppearanceConfig(normal_level=4, light_direction=FIGURE_LIGHT),
-                                  sheet)
+    appearance = PaperAppearance(
+        AppearanceConfig(normal_level=4, light_direction=FIGURE_LIGHT), sheet)
     grid = sheet.positions.reshape(129, 129, 3)
     stride = 2 ** (7 - 4 + 1)
     bilinear = np.stack([lowpass_filter(bilinear_upsample(grid[::stride, ::stride, axis],
