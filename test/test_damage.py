@@ -251,12 +251,6 @@ def test_same_seed_same_damage_other_seed_other_damage():
         or other['final_positions_sha256'] != first['final_positions_sha256']
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'the damage model never sees sub-steps (kinematic probe compression, checks at a fixed '
-    'rate), but the solver resolves the squeeze contact differently at 1 and 4 sub-steps: '
-    'the edge strips under the probes fold over locally instead of the middle arching '
-    '(BEND springs make sharp folds nearly free), and how far depends on the sub-step: '
-    'break means of 4 seeds differ ~2x. Strict: when it passes, drop this marker'))
 def test_squeeze_damage_does_not_depend_on_the_substep_count():
     """Break counts of single runs scatter by ±30 % from seed to seed (each break makes
     shorter springs at the probe, which see more compression): compare means of 4 seeds."""

@@ -244,32 +244,32 @@ def test_core_imports_neither_rclpy_nor_rerun():
     assert result.stdout.strip() == '', f'the core imported {result.stdout.strip()}'
 
 
-def test_global_step_solves_its_system_with_pins_and_soft_springs_out_of_the_factor():
+def test_global_step_solves_its_system_with_pins():
     """The prefactored global step (core/projective.py) returns the exact solution of
-    (M/h² + Σ k AᵀA) x = b over the free vertices, pinned couplings moved to b."""
+    (M/h² + K) x = b over the free vertices, pinned couplings moved to b, for the springs'
+    K = Σ k AᵀA and for the bending matrix Q (core/bending.py)."""
     import scipy.sparse as sparse
-    from paper_sim_ros.core.projective import GlobalStep
+    from paper_sim_ros.core.bending import HingeBending
+    from paper_sim_ros.core.projective import GlobalStep, spring_entries
     sheet = build_flat_sheet(SheetConfig(nx=9, ny=9))
     vertex_count = sheet.vertex_count
     pinned = np.zeros(vertex_count, dtype=bool)
     pinned[:9] = True
-    weight = np.where(sheet.spring_kind == HINGE, 200.0, 5.0)
-    in_matrix = sheet.spring_kind == HINGE
+    held = sheet.spring_kind == HINGE
+    springs = spring_entries(sheet.spring_vertices[held], np.full(int(np.sum(held)), 200.0))
+    bending = HingeBending(sheet.positions, sheet.triangles, 4e-4, 100.0,
+                           np.zeros((0, 2), dtype=np.int32)).matrix_entries()
     h = 1.0 / 60.0
-    step = GlobalStep(sheet.vertex_mass, pinned, sheet.spring_vertices, weight, in_matrix, h)
     rng = np.random.default_rng(7)
-    rhs = rng.normal(size=(vertex_count, 3))
-    positions = rng.normal(size=(vertex_count, 3))
-    pinned_positions = positions[pinned].copy()
-    step.solve(rhs, positions)
-    ends = sheet.spring_vertices[in_matrix]
-    k = weight[in_matrix]
-    laplacian = sparse.coo_matrix(
-        (np.concatenate([k, k, -k, -k]),
-         (np.concatenate([ends[:, 0], ends[:, 1], ends[:, 0], ends[:, 1]]),
-          np.concatenate([ends[:, 0], ends[:, 1], ends[:, 1], ends[:, 0]]))),
-        shape=(vertex_count, vertex_count)).tocsr()
-    system = (sparse.diags(sheet.vertex_mass / h ** 2) + laplacian).tocsr()
-    residual = (system @ positions - rhs)[~pinned]
-    np.testing.assert_allclose(residual, 0.0, atol=1e-9, err_msg='global step not solved')
-    np.testing.assert_array_equal(positions[pinned], pinned_positions)
+    for rows, columns, values in (springs, bending):
+        step = GlobalStep(sheet.vertex_mass, pinned, (rows, columns, values), h)
+        rhs = rng.normal(size=(vertex_count, 3))
+        positions = rng.normal(size=(vertex_count, 3))
+        pinned_positions = positions[pinned].copy()
+        step.solve(rhs, positions)
+        stiffness = sparse.coo_matrix((values, (rows, columns)),
+                                      shape=(vertex_count, vertex_count)).tocsr()
+        system = (sparse.diags(sheet.vertex_mass / h ** 2) + stiffness).tocsr()
+        residual = (system @ positions - rhs)[~pinned]
+        np.testing.assert_allclose(residual, 0.0, atol=1e-9, err_msg='global step not solved')
+        np.testing.assert_array_equal(positions[pinned], pinned_positions)

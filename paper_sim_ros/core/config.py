@@ -47,7 +47,14 @@ class SheetConfig:
     """Axial damping of HINGE springs [N·s/m] (used by the spring-force solvers)."""
     bend_stiffness: float = 2.0
     """Stiffness of BEND springs [N/m] at the reference cell size of 4.64 mm (65 vertices on
-    0.297 m); scaled with the cell size so that a sheet bends alike on any grid."""
+    0.297 m); scaled with the cell size so that a sheet bends alike on any grid. The
+    'paper' and 'explicit' solvers' bending; 'constrained' bends by ``bending_rigidity``."""
+    bending_rigidity: float = 4.0e-4
+    """Bending rigidity B [N·m] of the 'constrained' solver's dihedral hinges
+    (core/bending.py): E·t³/12 of office paper, E ≈ 5 GPa along the fibres, t ≈ 0.1 mm."""
+    yield_curvature: float = 100.0
+    """Curvature [1/m] beyond which a hinge yields and keeps part of its bend ('constrained'
+    solver): paper's fibres yield at ~0.5 % strain, κ = 2ε / thickness."""
     bend_damping: float = 2.0e-4
     """Axial damping of BEND springs [N·s/m]."""
     aux_stiffness: float = 3.0e4
@@ -57,7 +64,7 @@ class SheetConfig:
 
     def __post_init__(self) -> None:
         for name in ('width', 'height', 'grammage', 'stretch_stiffness', 'bend_stiffness',
-                     'aux_stiffness'):
+                     'aux_stiffness', 'bending_rigidity', 'yield_curvature'):
             _finite_positive(name, getattr(self, name))
         for name in ('stretch_damping', 'bend_damping'):
             _finite_non_negative(name, getattr(self, name))
@@ -75,7 +82,7 @@ class SolverConfig:
 
     method: str = 'constrained'
     """'constrained' (default): HINGE and AUX springs held within a strain band (projective
-    local/global iterations, then Gauss–Seidel strain limiting), BEND springs implicit;
+    local/global iterations, then Gauss–Seidel strain limiting), dihedral bending implicit;
     'paper': the paper's Eq. 6 Jacobi iteration, every spring a force;
     'explicit': symplectic Euler, kept to show why the paper needs an implicit method."""
     dt: float = 1.0 / 60.0

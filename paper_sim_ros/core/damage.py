@@ -46,15 +46,18 @@ MATERIAL_PRESETS: dict[str, dict[str, dict]] = {
     # (the paper's Fig. 12–13: large ψ folds like card board, small ψ bends like a bank
     # note; large φ is rubbery, small φ fragile)
     'printer_paper': {
-        'sheet': {'grammage': 0.080, 'stretch_stiffness': 3.0e5, 'bend_stiffness': 2.0},
+        'sheet': {'grammage': 0.080, 'stretch_stiffness': 3.0e5, 'bend_stiffness': 2.0,
+                  'bending_rigidity': 4.0e-4},
         'damage': {'fragility': 2.0, 'area_conservation': 1.0, 'fold_threshold': 0.6},
     },
     'cardboard': {
-        'sheet': {'grammage': 0.300, 'stretch_stiffness': 1.5e6, 'bend_stiffness': 40.0},
+        'sheet': {'grammage': 0.300, 'stretch_stiffness': 1.5e6, 'bend_stiffness': 40.0,
+                  'bending_rigidity': 1.0e-2},
         'damage': {'fragility': 1.5, 'area_conservation': 1.6, 'fold_threshold': 0.7},
     },
     'banknote': {
-        'sheet': {'grammage': 0.090, 'stretch_stiffness': 4.0e5, 'bend_stiffness': 1.0},
+        'sheet': {'grammage': 0.090, 'stretch_stiffness': 4.0e5, 'bend_stiffness': 1.0,
+                  'bending_rigidity': 2.0e-4},
         'damage': {'fragility': 4.0, 'area_conservation': 0.4, 'fold_threshold': 0.5},
     },
 }

@@ -5,6 +5,8 @@ local and global steps.
   local:  each spring's target vector d_s = its rest length × its current direction;
   global: (M/h² + Σ k_s A_sᵀ A_s) x = M y / h² + Σ k_s A_sᵀ d_s,  y = x + h v + h² f_ext / m.
 
+Bending is solved before, with the same machinery (core/bending.py).
+
 The matrix depends only on masses, springs and h, so it is factorised once per mesh
 change and every iteration is two sparse triangular solves: a correction reaches the
 whole sheet in one iteration, where Jacobi (Eq. 6) or Gauss–Seidel sweeps move it one
@@ -21,12 +23,9 @@ from .kernels import EPSILON_LENGTH
 
 
 @njit(cache=True)
-def local_targets(positions, weighted_inertia, spring_vertices, rest_length, weight,
-                  in_matrix, rhs):
-    """The global step's right-hand side into ``rhs``: M y / h² (``weighted_inertia``) plus
-    k_s A_sᵀ d_s for every spring, and for a spring left out of the matrix (``in_matrix``
-    false, the soft BEND springs; see GlobalStep) also -k_s A_sᵀ A_s x at the current
-    iterate."""
+def local_targets(positions, weighted_inertia, spring_vertices, rest_length, weight, rhs):
+    """The springs' part of the global step's right-hand side into ``rhs``: M y / h²
+    (``weighted_inertia``) plus k_s A_sᵀ d_s for every spring."""
     rhs[:, :] = weighted_inertia
     for s in range(spring_vertices.shape[0]):
         i = spring_vertices[s, 0]
@@ -37,8 +36,6 @@ def local_targets(positions, weighted_inertia, spring_vertices, rest_length, wei
         length = np.sqrt(dx * dx + dy * dy + dz * dz)
         k = weight[s]
         scale = k * rest_length[s] / length if length > EPSILON_LENGTH else 0.0
-        if not in_matrix[s]:
-            scale -= k
         rhs[j, 0] += scale * dx
         rhs[j, 1] += scale * dy
         rhs[j, 2] += scale * dz
@@ -131,27 +128,29 @@ def inertial_step(positions, velocities, pinned, mass, h, air_damping, gravity,
             weighted_inertia[v, axis] = scale * positions[v, axis]
 
 
+def spring_entries(spring_vertices: np.ndarray,
+                   weight: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, columns, values) of Σ k_s A_sᵀ A_s, the springs' graph Laplacian [N/m]."""
+    first, second = spring_vertices[:, 0], spring_vertices[:, 1]
+    return (np.concatenate([first, second, first, second]),
+            np.concatenate([first, second, second, first]),
+            np.concatenate([weight, weight, -weight, -weight]))
+
+
 class GlobalStep:
-    """The prefactored global step for one mesh, pin set and sub-step length."""
+    """The prefactored system M/h² + K of one mesh, pin set and sub-step length: the
+    springs' global step (K = Σ k AᵀA) or the bending step (K = Q, core/bending.py)."""
 
     def __init__(self, vertex_mass: np.ndarray, pinned: np.ndarray,
-                 spring_vertices: np.ndarray, weight: np.ndarray, in_matrix: np.ndarray,
-                 h: float) -> None:
-        """Springs where ``in_matrix`` is false stay out of the matrix and are taken at the
-        current iterate instead (local_targets). That splitting converges while their
-        stiffness is under a quarter of the matrix springs' (the iteration's eigenvalues
-        stay in (0, 2)); the caller keeps it so. BEND springs reach two cells across:
-        leaving them out cuts the factor's fill, and each solve, by about three."""
+                 stiffness: tuple[np.ndarray, np.ndarray, np.ndarray], h: float) -> None:
+        """``stiffness``: (rows, columns, values [N/m]) of K (duplicates add up). Each
+        coupling reaching two cells across (BEND springs, the bending step) about triples
+        the factor's fill and each solve's cost: the springs' step has none."""
         vertex_count = vertex_mass.shape[0]
-        spring_vertices = spring_vertices[in_matrix]
-        weight = weight[in_matrix]
-        first, second = spring_vertices[:, 0], spring_vertices[:, 1]
-        laplacian = sparse.coo_matrix(
-            (np.concatenate([weight, weight, -weight, -weight]),
-             (np.concatenate([first, second, first, second]),
-              np.concatenate([first, second, second, first]))),
-            shape=(vertex_count, vertex_count)).tocsr()
-        system = (sparse.diags(vertex_mass / (h * h)) + laplacian).tocsr()
+        rows, columns, values = stiffness
+        stiffness_matrix = sparse.coo_matrix((values, (rows, columns)),
+                                             shape=(vertex_count, vertex_count)).tocsr()
+        system = (sparse.diags(vertex_mass / (h * h)) + stiffness_matrix).tocsr()
         self.free = np.flatnonzero(~pinned).astype(np.int64)
         self.pinned = np.flatnonzero(pinned).astype(np.int64)
         # pinned vertices are not unknowns: their couplings go to the right-hand side

@@ -11,7 +11,8 @@ One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps.
 
 'constrained' sub-steps (the default: paper-stiff and real time, SPEC §2):
   # inertia                y = x + h v + h² f_ext / m
-  # implicit springs       projective iterations: local targets, prefactored global solve
+  # implicit springs       projective iterations: local targets and dihedral bending,
+                           prefactored global solve
   # contact                probes (swept) and table, with friction
   # stretch                Gauss–Seidel strain limiting + long-range attachments + contact
   # velocities             v = (x - x_start) / h, so every projection is velocity-consistent
@@ -24,8 +25,9 @@ import numpy as np
 
 from . import kernels
 from .config import SimulationConfig
+from .bending import HingeBending
 from .damage import DamageModel
-from .projective import GlobalStep, inertial_step, local_targets
+from .projective import GlobalStep, inertial_step, local_targets, spring_entries
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet
 
 NEAR_PIN_LEVELS = 10
@@ -64,6 +66,7 @@ class Simulator:
         self.frame = 0
         self.nan_seen = False
         self.probes = Probes()
+        self._bending = None  # rest angles from the initial sheet
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
             self.config.damage, self.config.seed, self.config.sheet.aux_stiffness,
@@ -119,7 +122,7 @@ class Simulator:
         constraint sweep order, the long-range attachments and the global step's factor."""
         sheet = self.sheet
         self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
-        self._global_step = None
+        self._global_step = self._bending_step = None
         if self.config.solver.method != 'constrained':
             self._constraint_springs = np.zeros(0, dtype=np.int64)
             self._near_pin_count = 0
@@ -135,17 +138,23 @@ class Simulator:
         self._constraint_springs = constraint_springs[order]
         self._near_pin_count = int(np.sum(level.min(axis=1) < NEAR_PIN_LEVELS))
         self._build_attachments()
-        # held springs enter the global step with a solver weight, the others (BEND) with
-        # their own stiffness: their implicit Euler step
-        self._global_weight = np.where(held, self.config.solver.global_stiffness,
-                                       sheet.spring_stiffness)
-        # soft springs stay out of the factor (a third of its fill) while that converges
-        self._in_matrix = held | (self._global_weight > 0.25 * self.config.solver.global_stiffness)
+        # held springs enter the global step with a solver weight; bending has its own step
+        # (BEND springs, second order in the fold angle, only mark the hinges)
+        self._held_springs = np.flatnonzero(held)
+        self._global_weight = np.full(self._held_springs.size,
+                                      self.config.solver.global_stiffness)
+        self._bending = HingeBending(sheet.positions, sheet.triangles,
+                                     self.config.sheet.bending_rigidity,
+                                     self.config.sheet.yield_curvature,
+                                     sheet.spring_vertices[kind == AUX], self._bending)
         h = self.config.solver.dt / self.config.solver.substeps
         if np.any(~sheet.pinned):
-            self._global_step = GlobalStep(sheet.vertex_mass, sheet.pinned,
-                                           sheet.spring_vertices, self._global_weight,
-                                           self._in_matrix, h)
+            self._bending_step = GlobalStep(sheet.vertex_mass, sheet.pinned,
+                                            self._bending.matrix_entries(), h)
+            self._global_step = GlobalStep(
+                sheet.vertex_mass, sheet.pinned,
+                spring_entries(sheet.spring_vertices[self._held_springs], self._global_weight),
+                h)
 
     def _build_attachments(self) -> None:
         sheet = self.sheet
@@ -177,6 +186,9 @@ class Simulator:
         substeps = solver.substeps
         h = solver.dt / substeps
         saved_positions = self.sheet.positions.copy()
+        # paper yields where it is bent too sharply: a crease sets (damage, like a break)
+        if self._bending is not None and self.config.damage.enabled:
+            self._bending.yield_plastically(self.sheet.positions)
         probe_path = self.probes.end - self.probes.start
         for sub in range(substeps):
             probe_from = self.probes.start + probe_path * (sub / substeps)
@@ -252,9 +264,15 @@ class Simulator:
         positions += h * velocities
 
     def _projective_step(self, h: float) -> None:
-        """Implicit Euler of all springs by local/global iterations (core/projective.py).
-        Every spring aims at its rest length here, so the sheet keeps its own shape (an
-        aged sheet its waviness); the strain band is then enforced by _limit_strain."""
+        """Implicit Euler split in two: bending (one solve of core/bending.py's system from
+        the inertial prediction), then the springs by local/global iterations
+        (core/projective.py) from where bending left the sheet. Keeping the two apart
+        matters: in one system the springs' solver weight, which must be large for paper's
+        stiffness, resists every bending motion until the iterations turn the springs'
+        targets, and a few iterations never do; bending, being near-linear, needs one
+        solve. Every spring aims at its rest length and every hinge at its rest shape, so
+        the sheet keeps its own shape (an aged sheet its waviness); the strain band is
+        then enforced by _limit_strain."""
         sheet = self.sheet
         solver = self.config.solver
         positions = sheet.positions
@@ -265,10 +283,16 @@ class Simulator:
         if self._global_step is None:
             return
         rhs = np.empty_like(positions)
-        for _ in range(solver.projective_iterations):
-            local_targets(positions, weighted_inertia, sheet.spring_vertices,
-                          sheet.spring_rest_length, self._global_weight, self._in_matrix, rhs)
+        ends = sheet.spring_vertices[self._held_springs]
+        rest = sheet.spring_rest_length[self._held_springs]
+        for iteration in range(solver.projective_iterations):
+            local_targets(positions, weighted_inertia, ends, rest, self._global_weight, rhs)
             self._global_step.solve(rhs, positions)
+            if iteration == 0:
+                weighted_inertia[:] = positions * (sheet.vertex_mass / (h * h))[:, None]
+                self._bending.add_targets(positions, weighted_inertia)
+                self._bending_step.solve(weighted_inertia, positions)
+                weighted_inertia[:] = positions * (sheet.vertex_mass / (h * h))[:, None]
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
                       inverse_mass) -> None:
@@ -277,6 +301,14 @@ class Simulator:
         rest = self.sheet.spring_rest_length[self._constraint_springs]
         shortest = 1.0 - solver.max_compression
         longest = 1.0 + solver.max_stretch
+        # where the sheet folds away from its pins the strain concentrates (a released
+        # sheet folds at its clamped edge); a few more sweeps there cost a few rows only.
+        # They come first: the full sweeps after them smooth the seam at their border
+        near = self._near_pin_count
+        for _ in range(NEAR_PIN_SWEEPS if near else 0):
+            for reverse in (False, True):
+                kernels.project_springs(positions, inverse_mass, ends[:near],
+                                        rest[:near], shortest, longest, reverse)
         for _ in range(solver.constraint_iterations):
             for reverse in (False, True):
                 kernels.project_springs(positions, inverse_mass, ends, rest,
@@ -284,13 +316,6 @@ class Simulator:
             kernels.project_attachments(positions, self._attached, self._anchor,
                                         self._attachment_length)
             self._contact(positions, start_positions, probe_from, probe_to, False)
-        # where the sheet folds away from its pins the strain concentrates (a released
-        # sheet folds at its clamped edge); a few more sweeps there cost a few rows only
-        near = self._near_pin_count
-        for _ in range(NEAR_PIN_SWEEPS if near else 0):
-            for reverse in (False, True):
-                kernels.project_springs(positions, inverse_mass, ends[:near],
-                                        rest[:near], shortest, longest, reverse)
 
     def _contact(self, positions, start_positions, probe_from, probe_to, with_friction,
                  touched=None):
@@ -332,17 +357,17 @@ class Simulator:
                                             sheet.spring_rest_length, sheet.spring_kind, HINGE))
 
     def energy(self) -> float:
-        """Kinetic + gravitational + elastic energy [J]. The elastic part counts the
-        springs that act as forces: every spring for 'paper' and 'explicit', the BEND
-        springs for 'constrained', whose held springs are inextensible (their slack within
-        the strain band stores nothing)."""
+        """Kinetic + gravitational + elastic energy [J]. The elastic part counts what
+        acts as a force: every spring for 'paper' and 'explicit'; for 'constrained' the
+        dihedral bending, its held springs being inextensible (their slack within the
+        strain band stores nothing)."""
         sheet = self.sheet
         gravity = np.asarray(self.config.solver.gravity)
         kinetic = 0.5 * np.sum(sheet.vertex_mass * np.sum(sheet.velocities ** 2, axis=1))
         potential = -np.sum(sheet.vertex_mass * (sheet.positions @ gravity))
-        elastic_springs = np.ones(sheet.spring_count, dtype=bool)
         if self.config.solver.method == 'constrained':
-            elastic_springs[self._constraint_springs] = False
+            return float(kinetic + potential + self._bending.energy(sheet.positions))
+        elastic_springs = np.ones(sheet.spring_count, dtype=bool)
         ends = sheet.spring_vertices[elastic_springs]
         length = np.linalg.norm(sheet.positions[ends[:, 1]] - sheet.positions[ends[:, 0]], axis=1)
         stretch = length - sheet.spring_rest_length[elastic_springs]

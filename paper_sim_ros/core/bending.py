@@ -1,0 +1,232 @@
+"""Bending for the 'constrained' solver (SPEC §1: "the paper is silent on bending
+resistance, but paper has it").
+
+A BEND spring resists a fold of angle θ only to second order in θ (its length changes by
+O(θ²)), so it makes gentle curvature free: the sheet drapes like cloth, an aged sheet's
+waviness flattens under its own weight, and a push folds the sheet locally instead of
+arching it. Paper resists curvature to first order. Each interior edge (i, j) with opposite
+vertices r and l (a hinge, the paper's Fig. 6) therefore carries a projective-dynamics
+bending constraint (Bouaziz et al. 2014; quadratic isometric bending, Bergou et al. 2006):
+
+    κ = Σ_v w_v x_v  (v = i, j, r, l),    E = ½ k |κ - R κ0|²,    k = B |e|² / (A_r + A_l)
+
+with w_v = ∂θ/∂x_v · n (Bridson et al. 2003) measured where the hinge is created, so that
+κ ≈ θ n for a near-flat hinge and E ≈ ½ k (θ - θ0)²; κ0 is the rest shape's κ, kept in the
+hinge's own frame (edge, mean normal, their cross product) and R turns that frame to the
+current one (the local step). B is the bending rigidity [N·m]; k is calibrated so that a
+cylinder bent about a grid axis stores ½ B curvature² per unit area. Rest shapes: the sheet's
+(flat, or the aged fractal); a hinge that damage creates or changes takes its shape at that
+moment: the crease is remembered (SPEC §4).
+
+Σ k w wᵀ = Q is constant, so the bending step (M/h² + Q) x = M y / h² + Σ k w R κ0 is
+factorised once per mesh change like the springs' global step (core/projective.py), and
+one solve per sub-step carries the sheet's weight by bending at once. For a flat rest
+shape R κ0 = 0 and the step is exact: bending is linear in x for isometric motion.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .topology import edge_key
+
+MAX_SHAPE_RATIO = 4.0
+"""|e|² / (A_r + A_l) is capped here, and heights are floored at a quarter of the edge: a
+sliver hinge left by damage does not get a stiffness out of proportion. A grid hinge has
+1 (along an axis) or 2 (a diagonal)."""
+
+
+def hinge_quads(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
+    """(H, 4) int32 rows (i, j, r, l), one per interior edge, with i < j, triangle (i, j, r)
+    and (j, i, l) in the mesh's orientation: a canonical order, so that a hinge is
+    recognised after any mesh change."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    start = np.concatenate([a, b, c]).astype(np.int64)
+    end = np.concatenate([b, c, a]).astype(np.int64)
+    across = np.concatenate([c, a, b]).astype(np.int64)
+    forward = start < end  # the half-edge running i -> j (i < j) has r across it
+    key = edge_key(start, end, vertex_count)
+    forward_key, backward_key = key[forward], key[~forward]
+    order = np.argsort(backward_key)
+    if order.size == 0:
+        return np.zeros((0, 4), dtype=np.int32)
+    # the other triangle of an interior edge runs it j -> i, with l across
+    position = np.minimum(np.searchsorted(backward_key[order], forward_key), order.size - 1)
+    match = order[position]
+    paired = backward_key[match] == forward_key
+    return np.column_stack([start[forward][paired], end[forward][paired],
+                            across[forward][paired],
+                            across[~forward][match[paired]]]).astype(np.int32)
+
+
+@njit(cache=True)
+def _frame(positions, i, j, r, left, frame):
+    """The hinge's frame into ``frame`` rows: unit edge, unit mean normal, their cross
+    product. Returns the edge vector and the two area-weighted triangle normals."""
+    e = positions[j] - positions[i]
+    n_r = np.cross(e, positions[r] - positions[i])
+    n_l = np.cross(positions[left] - positions[i], e)
+    edge_length = max(np.sqrt(np.dot(e, e)), 1e-300)
+    normal = n_r / max(np.sqrt(np.dot(n_r, n_r)), 1e-300) \
+        + n_l / max(np.sqrt(np.dot(n_l, n_l)), 1e-300)
+    size = np.sqrt(np.dot(normal, normal))
+    if size < 1e-6:  # folded flat on itself: the mean normal is lost; take r's
+        normal = n_r
+        size = max(np.sqrt(np.dot(normal, normal)), 1e-300)
+    frame[0] = e / edge_length
+    frame[1] = normal / size
+    frame[2] = np.cross(frame[1], frame[0])
+    return e, n_r, n_l
+
+
+@njit(cache=True)
+def hinge_rest_state(positions, quads, rigidity, yield_curvature, weights, stiffness,
+                     yield_angle, rest_curvature):
+    """For every hinge at ``positions``: the weights w (H, 4) [1/m], the stiffness k [N·m],
+    the yield angle [rad] (yield curvature × the hinge's width) and κ in the hinge's frame
+    (H, 3) [rad]."""
+    frame = np.empty((3, 3))
+    for h in range(quads.shape[0]):
+        i, j, r, left = quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3]
+        e, n_r, n_l = _frame(positions, i, j, r, left, frame)
+        edge_squared = max(np.dot(e, e), 1e-300)
+        edge_length = np.sqrt(edge_squared)
+        height_r = max(np.sqrt(np.dot(n_r, n_r)) / edge_length, 0.25 * edge_length)
+        height_l = max(np.sqrt(np.dot(n_l, n_l)) / edge_length, 0.25 * edge_length)
+        # where r and l project onto the edge, as a fraction of it
+        along_r = np.dot(positions[r] - positions[i], e) / edge_squared
+        along_l = np.dot(positions[left] - positions[i], e) / edge_squared
+        weights[h, 0] = (1.0 - along_r) / height_r + (1.0 - along_l) / height_l
+        weights[h, 1] = along_r / height_r + along_l / height_l
+        weights[h, 2] = -1.0 / height_r
+        weights[h, 3] = -1.0 / height_l
+        ratio = 2.0 * edge_length / (height_r + height_l)  # |e|² / (A_r + A_l)
+        stiffness[h] = rigidity * min(ratio, MAX_SHAPE_RATIO)
+        yield_angle[h] = yield_curvature * 0.5 * (height_r + height_l)
+        for row in range(3):
+            rest_curvature[h, row] = 0.0
+        for corner in range(4):
+            v = quads[h, corner]
+            for row in range(3):
+                rest_curvature[h, row] += weights[h, corner] * np.dot(frame[row], positions[v])
+
+
+@njit(cache=True)
+def add_bending_targets(positions, quads, weights, stiffness, rest_curvature, rhs):
+    """The local step: every hinge's target R κ0 in its current frame, k w_v R κ0 added to
+    ``rhs`` for its four vertices."""
+    frame = np.empty((3, 3))
+    for h in range(quads.shape[0]):
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame)
+        target = (rest_curvature[h, 0] * frame[0] + rest_curvature[h, 1] * frame[1]
+                  + rest_curvature[h, 2] * frame[2])
+        for corner in range(4):
+            v = quads[h, corner]
+            for axis in range(3):
+                rhs[v, axis] += stiffness[h] * weights[h, corner] * target[axis]
+
+
+@njit(cache=True)
+def yield_hinges(positions, quads, weights, yield_angle, rest_curvature):
+    """Plastic yield: where |κ - R κ0| exceeds a hinge's yield angle, κ0 follows κ to that
+    distance (perfect plasticity). Returns how many hinges yielded."""
+    frame = np.empty((3, 3))
+    curvature = np.empty(3)
+    yielded = 0
+    for h in range(quads.shape[0]):
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame)
+        for row in range(3):
+            curvature[row] = 0.0
+            for corner in range(4):
+                curvature[row] += weights[h, corner] * np.dot(frame[row],
+                                                              positions[quads[h, corner]])
+        excess = curvature - rest_curvature[h]
+        size = np.sqrt(np.dot(excess, excess))
+        if size > yield_angle[h]:
+            rest_curvature[h] += excess * (1.0 - yield_angle[h] / size)
+            yielded += 1
+    return yielded
+
+
+@njit(cache=True)
+def bending_energy(positions, quads, weights, stiffness, rest_curvature):
+    """Σ ½ k |κ - R κ0|² [J]."""
+    frame = np.empty((3, 3))
+    total = 0.0
+    for h in range(quads.shape[0]):
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame)
+        squared = 0.0
+        for axis in range(3):
+            gap = -(rest_curvature[h, 0] * frame[0, axis] + rest_curvature[h, 1] * frame[1, axis]
+                    + rest_curvature[h, 2] * frame[2, axis])
+            for corner in range(4):
+                gap += weights[h, corner] * positions[quads[h, corner], axis]
+            squared += gap * gap
+        total += 0.5 * stiffness[h] * squared
+    return total
+
+
+class HingeBending:
+    """The bending state of one mesh: its hinges, weights, stiffness and rest curvature.
+    Rebuilt whenever the mesh changes; a hinge that survives keeps its rest shape."""
+
+    def __init__(self, positions: np.ndarray, triangles: np.ndarray, rigidity: float,
+                 yield_curvature: float, fold_pairs: np.ndarray,
+                 previous: 'HingeBending | None' = None) -> None:
+        """``fold_pairs``: (F, 2) vertex pairs of AUX springs; a hinge whose opposite
+        vertices are one of them is a fold. A hinge that ``previous`` had, with the same
+        opposite vertices and fold state, keeps its weights, stiffness and rest curvature;
+        any other is measured now (at reset, with no ``previous``: the rest shape)."""
+        vertex_count = positions.shape[0]
+        self.quads = hinge_quads(triangles, vertex_count)
+        count = self.quads.shape[0]
+        self.folded = np.isin(edge_key(self.quads[:, 2], self.quads[:, 3], vertex_count),
+                              edge_key(fold_pairs[:, 0], fold_pairs[:, 1], vertex_count))
+        self.weights = np.empty((count, 4))
+        self.stiffness = np.empty(count)
+        self.yield_angle = np.empty(count)
+        self.rest_curvature = np.empty((count, 3))
+        hinge_rest_state(positions, self.quads, rigidity, yield_curvature, self.weights,
+                         self.stiffness, self.yield_angle, self.rest_curvature)
+        if previous is not None and previous.quads.shape[0] and count:
+            self._carry_over(previous)
+
+    def _carry_over(self, previous: 'HingeBending') -> None:
+        # a hinge is known by its edge (i < j); vertex indices never change
+        old_key = _edge_key(previous.quads)
+        new_key = _edge_key(self.quads)
+        order = np.argsort(old_key)
+        position = np.minimum(np.searchsorted(old_key[order], new_key), order.size - 1)
+        match = order[position]
+        same = (old_key[match] == new_key) \
+            & np.all(previous.quads[match, 2:] == self.quads[:, 2:], axis=1) \
+            & (previous.folded[match] == self.folded)
+        for name in ('weights', 'stiffness', 'yield_angle', 'rest_curvature'):
+            getattr(self, name)[same] = getattr(previous, name)[match[same]]
+
+    def matrix_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, columns, values) [N/m] of Q = Σ k w wᵀ."""
+        rows = np.repeat(self.quads, 4, axis=1).ravel()
+        columns = np.tile(self.quads, (1, 4)).ravel()
+        values = (self.stiffness[:, None, None] * self.weights[:, :, None]
+                  * self.weights[:, None, :]).ravel()
+        return rows, columns, values
+
+    def add_targets(self, positions: np.ndarray, rhs: np.ndarray) -> None:
+        """The local step's bending part of the global step's right-hand side."""
+        add_bending_targets(positions, self.quads, self.weights, self.stiffness,
+                            self.rest_curvature, rhs)
+
+    def yield_plastically(self, positions: np.ndarray) -> int:
+        """Bend the rest shape of over-bent hinges (a crease sets); returns their count."""
+        return int(yield_hinges(positions, self.quads, self.weights, self.yield_angle,
+                                self.rest_curvature))
+
+    def energy(self, positions: np.ndarray) -> float:
+        """Σ ½ k |κ - R κ0|² [J]."""
+        return float(bending_energy(positions, self.quads, self.weights, self.stiffness,
+                                    self.rest_curvature))
+
+
+def _edge_key(quads: np.ndarray) -> np.ndarray:
+    return (quads[:, 0].astype(np.int64) << 32) | quads[:, 1].astype(np.int64)
