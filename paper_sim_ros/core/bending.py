@@ -30,6 +30,10 @@ from numba import njit
 
 from .topology import edge_key
 
+FLAT_REST = 1e-9
+"""Hinges whose rest |κ0| is below this [rad] rest flat: their target is zero and skipped
+(the whole sheet, until it is aged or damaged)."""
+
 MAX_SHAPE_RATIO = 4.0
 """|e|² / (A_r + A_l) is capped here, and heights are floored at a quarter of the edge: a
 sliver hinge left by damage does not get a stiffness out of proportion. A grid hinge has
@@ -60,23 +64,60 @@ def hinge_quads(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _frame(positions, i, j, r, left, frame):
+def _cross_into(out, row, ax, ay, az, bx, by, bz):
+    out[row, 0] = ay * bz - az * by
+    out[row, 1] = az * bx - ax * bz
+    out[row, 2] = ax * by - ay * bx
+
+
+@njit(cache=True)
+def _frame(positions, i, j, r, left, frame, geometry):
     """The hinge's frame into ``frame`` rows: unit edge, unit mean normal, their cross
-    product. Returns the edge vector and the two area-weighted triangle normals."""
-    e = positions[j] - positions[i]
-    n_r = np.cross(e, positions[r] - positions[i])
-    n_l = np.cross(positions[left] - positions[i], e)
-    edge_length = max(np.sqrt(np.dot(e, e)), 1e-300)
-    normal = n_r / max(np.sqrt(np.dot(n_r, n_r)), 1e-300) \
-        + n_l / max(np.sqrt(np.dot(n_l, n_l)), 1e-300)
-    size = np.sqrt(np.dot(normal, normal))
+    product; into ``geometry`` rows the edge vector e = x_j - x_i and the area-weighted
+    normals n_r = e × (x_r - x_i), n_l = (x_l - x_i) × e. Scalar code: no allocation."""
+    ex = positions[j, 0] - positions[i, 0]
+    ey = positions[j, 1] - positions[i, 1]
+    ez = positions[j, 2] - positions[i, 2]
+    geometry[0, 0] = ex
+    geometry[0, 1] = ey
+    geometry[0, 2] = ez
+    _cross_into(geometry, 1, ex, ey, ez, positions[r, 0] - positions[i, 0],
+                positions[r, 1] - positions[i, 1], positions[r, 2] - positions[i, 2])
+    _cross_into(geometry, 2, positions[left, 0] - positions[i, 0],
+                positions[left, 1] - positions[i, 1], positions[left, 2] - positions[i, 2],
+                ex, ey, ez)
+    edge_length = max(np.sqrt(ex * ex + ey * ey + ez * ez), 1e-300)
+    size_r = max(np.sqrt(geometry[1, 0] ** 2 + geometry[1, 1] ** 2 + geometry[1, 2] ** 2),
+                 1e-300)
+    size_l = max(np.sqrt(geometry[2, 0] ** 2 + geometry[2, 1] ** 2 + geometry[2, 2] ** 2),
+                 1e-300)
+    for axis in range(3):
+        frame[0, axis] = geometry[0, axis] / edge_length
+        frame[1, axis] = geometry[1, axis] / size_r + geometry[2, axis] / size_l
+    size = np.sqrt(frame[1, 0] ** 2 + frame[1, 1] ** 2 + frame[1, 2] ** 2)
     if size < 1e-6:  # folded flat on itself: the mean normal is lost; take r's
-        normal = n_r
-        size = max(np.sqrt(np.dot(normal, normal)), 1e-300)
-    frame[0] = e / edge_length
-    frame[1] = normal / size
-    frame[2] = np.cross(frame[1], frame[0])
-    return e, n_r, n_l
+        for axis in range(3):
+            frame[1, axis] = geometry[1, axis] / size_r
+        size = 1.0
+    for axis in range(3):
+        frame[1, axis] /= size
+    _cross_into(frame, 2, frame[1, 0], frame[1, 1], frame[1, 2],
+                frame[0, 0], frame[0, 1], frame[0, 2])
+
+
+@njit(cache=True)
+def _curvature_in_frame(positions, quads, weights, h, frame, curvature):
+    """κ = Σ w_v x_v of hinge ``h`` in its frame's coordinates, into ``curvature``."""
+    kx = 0.0
+    ky = 0.0
+    kz = 0.0
+    for corner in range(4):
+        v = quads[h, corner]
+        kx += weights[h, corner] * positions[v, 0]
+        ky += weights[h, corner] * positions[v, 1]
+        kz += weights[h, corner] * positions[v, 2]
+    for row in range(3):
+        curvature[row] = frame[row, 0] * kx + frame[row, 1] * ky + frame[row, 2] * kz
 
 
 @njit(cache=True)
@@ -86,16 +127,22 @@ def hinge_rest_state(positions, quads, rigidity, yield_curvature, weights, stiff
     the yield angle [rad] (yield curvature × the hinge's width) and κ in the hinge's frame
     (H, 3) [rad]."""
     frame = np.empty((3, 3))
+    geometry = np.empty((3, 3))
     for h in range(quads.shape[0]):
         i, j, r, left = quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3]
-        e, n_r, n_l = _frame(positions, i, j, r, left, frame)
-        edge_squared = max(np.dot(e, e), 1e-300)
+        _frame(positions, i, j, r, left, frame, geometry)
+        edge_squared = max(np.sum(geometry[0] ** 2), 1e-300)
         edge_length = np.sqrt(edge_squared)
-        height_r = max(np.sqrt(np.dot(n_r, n_r)) / edge_length, 0.25 * edge_length)
-        height_l = max(np.sqrt(np.dot(n_l, n_l)) / edge_length, 0.25 * edge_length)
+        height_r = max(np.sqrt(np.sum(geometry[1] ** 2)) / edge_length, 0.25 * edge_length)
+        height_l = max(np.sqrt(np.sum(geometry[2] ** 2)) / edge_length, 0.25 * edge_length)
         # where r and l project onto the edge, as a fraction of it
-        along_r = np.dot(positions[r] - positions[i], e) / edge_squared
-        along_l = np.dot(positions[left] - positions[i], e) / edge_squared
+        along_r = 0.0
+        along_l = 0.0
+        for axis in range(3):
+            along_r += (positions[r, axis] - positions[i, axis]) * geometry[0, axis]
+            along_l += (positions[left, axis] - positions[i, axis]) * geometry[0, axis]
+        along_r /= edge_squared
+        along_l /= edge_squared
         weights[h, 0] = (1.0 - along_r) / height_r + (1.0 - along_l) / height_l
         weights[h, 1] = along_r / height_r + along_l / height_l
         weights[h, 2] = -1.0 / height_r
@@ -103,27 +150,23 @@ def hinge_rest_state(positions, quads, rigidity, yield_curvature, weights, stiff
         ratio = 2.0 * edge_length / (height_r + height_l)  # |e|² / (A_r + A_l)
         stiffness[h] = rigidity * min(ratio, MAX_SHAPE_RATIO)
         yield_angle[h] = yield_curvature * 0.5 * (height_r + height_l)
-        for row in range(3):
-            rest_curvature[h, row] = 0.0
-        for corner in range(4):
-            v = quads[h, corner]
-            for row in range(3):
-                rest_curvature[h, row] += weights[h, corner] * np.dot(frame[row], positions[v])
+        _curvature_in_frame(positions, quads, weights, h, frame, rest_curvature[h])
 
 
 @njit(cache=True)
-def add_bending_targets(positions, quads, weights, stiffness, rest_curvature, rhs):
-    """The local step: every hinge's target R κ0 in its current frame, k w_v R κ0 added to
-    ``rhs`` for its four vertices."""
+def add_bending_targets(positions, quads, weights, stiffness, rest_curvature, hinges, rhs):
+    """The local step: the target R κ0 of every hinge in ``hinges`` in its current frame,
+    k w_v R κ0 added to ``rhs`` for its four vertices."""
     frame = np.empty((3, 3))
-    for h in range(quads.shape[0]):
-        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame)
-        target = (rest_curvature[h, 0] * frame[0] + rest_curvature[h, 1] * frame[1]
-                  + rest_curvature[h, 2] * frame[2])
-        for corner in range(4):
-            v = quads[h, corner]
-            for axis in range(3):
-                rhs[v, axis] += stiffness[h] * weights[h, corner] * target[axis]
+    geometry = np.empty((3, 3))
+    for h in hinges:
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
+        for axis in range(3):
+            target = stiffness[h] * (rest_curvature[h, 0] * frame[0, axis]
+                                     + rest_curvature[h, 1] * frame[1, axis]
+                                     + rest_curvature[h, 2] * frame[2, axis])
+            for corner in range(4):
+                rhs[quads[h, corner], axis] += weights[h, corner] * target
 
 
 @njit(cache=True)
@@ -131,19 +174,20 @@ def yield_hinges(positions, quads, weights, yield_angle, rest_curvature):
     """Plastic yield: where |κ - R κ0| exceeds a hinge's yield angle, κ0 follows κ to that
     distance (perfect plasticity). Returns how many hinges yielded."""
     frame = np.empty((3, 3))
+    geometry = np.empty((3, 3))
     curvature = np.empty(3)
     yielded = 0
     for h in range(quads.shape[0]):
-        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame)
-        for row in range(3):
-            curvature[row] = 0.0
-            for corner in range(4):
-                curvature[row] += weights[h, corner] * np.dot(frame[row],
-                                                              positions[quads[h, corner]])
-        excess = curvature - rest_curvature[h]
-        size = np.sqrt(np.dot(excess, excess))
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
+        _curvature_in_frame(positions, quads, weights, h, frame, curvature)
+        size = np.sqrt((curvature[0] - rest_curvature[h, 0]) ** 2
+                       + (curvature[1] - rest_curvature[h, 1]) ** 2
+                       + (curvature[2] - rest_curvature[h, 2]) ** 2)
         if size > yield_angle[h]:
-            rest_curvature[h] += excess * (1.0 - yield_angle[h] / size)
+            keep = yield_angle[h] / size
+            for row in range(3):
+                rest_curvature[h, row] = curvature[row] \
+                    + keep * (rest_curvature[h, row] - curvature[row])
             yielded += 1
     return yielded
 
@@ -152,17 +196,15 @@ def yield_hinges(positions, quads, weights, yield_angle, rest_curvature):
 def bending_energy(positions, quads, weights, stiffness, rest_curvature):
     """Σ ½ k |κ - R κ0|² [J]."""
     frame = np.empty((3, 3))
+    geometry = np.empty((3, 3))
+    curvature = np.empty(3)
     total = 0.0
     for h in range(quads.shape[0]):
-        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame)
-        squared = 0.0
-        for axis in range(3):
-            gap = -(rest_curvature[h, 0] * frame[0, axis] + rest_curvature[h, 1] * frame[1, axis]
-                    + rest_curvature[h, 2] * frame[2, axis])
-            for corner in range(4):
-                gap += weights[h, corner] * positions[quads[h, corner], axis]
-            squared += gap * gap
-        total += 0.5 * stiffness[h] * squared
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
+        _curvature_in_frame(positions, quads, weights, h, frame, curvature)
+        total += 0.5 * stiffness[h] * ((curvature[0] - rest_curvature[h, 0]) ** 2
+                                       + (curvature[1] - rest_curvature[h, 1]) ** 2
+                                       + (curvature[2] - rest_curvature[h, 2]) ** 2)
     return total
 
 
@@ -190,6 +232,11 @@ class HingeBending:
                          self.stiffness, self.yield_angle, self.rest_curvature)
         if previous is not None and previous.quads.shape[0] and count:
             self._carry_over(previous)
+        self._find_curved()
+
+    def _find_curved(self) -> None:
+        self._curved = np.flatnonzero(np.abs(self.rest_curvature).max(axis=1, initial=0.0)
+                                      > FLAT_REST)
 
     def _carry_over(self, previous: 'HingeBending') -> None:
         # a hinge is known by its edge (i < j); vertex indices never change
@@ -215,12 +262,15 @@ class HingeBending:
     def add_targets(self, positions: np.ndarray, rhs: np.ndarray) -> None:
         """The local step's bending part of the global step's right-hand side."""
         add_bending_targets(positions, self.quads, self.weights, self.stiffness,
-                            self.rest_curvature, rhs)
+                            self.rest_curvature, self._curved, rhs)
 
     def yield_plastically(self, positions: np.ndarray) -> int:
         """Bend the rest shape of over-bent hinges (a crease sets); returns their count."""
-        return int(yield_hinges(positions, self.quads, self.weights, self.yield_angle,
-                                self.rest_curvature))
+        yielded = int(yield_hinges(positions, self.quads, self.weights, self.yield_angle,
+                                   self.rest_curvature))
+        if yielded:
+            self._find_curved()
+        return yielded
 
     def energy(self, positions: np.ndarray) -> float:
         """Σ ½ k |κ - R κ0|² [J]."""

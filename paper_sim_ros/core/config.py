@@ -97,7 +97,7 @@ class SolverConfig:
     """Weight [N/m] of the held springs in the global step ('constrained'). It is a solver
     weight, not the material's E·t: the strain band, not this, holds paper inextensible;
     far larger weights lock the sheet's rotation in few iterations."""
-    constraint_iterations: int = 6
+    constraint_iterations: int = 4
     """Symmetric Gauss–Seidel strain-limiting sweeps per sub-step ('constrained')."""
     max_stretch: float = 0.003
     """Stretch the projection aims for at most (l/l0 - 1)."""

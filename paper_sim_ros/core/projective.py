@@ -45,39 +45,15 @@ def local_targets(positions, weighted_inertia, spring_vertices, rest_length, wei
 
 
 @njit(cache=True)
-def _substitute(pointer, index, value, diagonal, backward, work):
-    """Column-oriented triangular solve in place on the three columns of ``work``: the
-    factor in CSC without its diagonal, lower (forward) or upper (``backward``)."""
-    count = diagonal.shape[0]
-    for step in range(count):
-        column = count - 1 - step if backward else step
-        scale = 1.0 / diagonal[column]
-        z0 = work[column, 0] * scale
-        z1 = work[column, 1] * scale
-        z2 = work[column, 2] * scale
-        work[column, 0] = z0
-        work[column, 1] = z1
-        work[column, 2] = z2
-        for p in range(pointer[column], pointer[column + 1]):
-            row = index[p]
-            entry = value[p]
-            work[row, 0] -= entry * z0
-            work[row, 1] -= entry * z1
-            work[row, 2] -= entry * z2
-
-
-@njit(cache=True)
-def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upper_pointer,
-                    upper_index, upper_value, upper_diagonal, row_permutation,
-                    column_permutation, coupling_pointer, coupling_index, coupling_value,
-                    free, rhs, positions, work):
-    """positions[free] ← A⁻¹ (rhs - A_fp x_p)[free] from SuperLU's Pr A Pc = L U. The
-    factors are in CSC with their diagonals held apart (``*_diagonal``), so each loop
-    streams once; A_fp (free rows × pinned vertices) is in CSR (``coupling_*``)."""
+def _solve_factored(pointer, index, value, diagonal, permutation, coupling_pointer,
+                    coupling_index, coupling_value, free, rhs, positions, work):
+    """positions[free] ← A⁻¹ (rhs - A_fp x_p)[free] from P A Pᵀ = L D Lᵀ, on the three
+    columns at once. L (unit diagonal, held apart) is in CSC: the forward substitution
+    streams it by columns, the backward one (Lᵀ) reads the same columns as rows, so the
+    factor is read twice and stored once. A_fp (free rows × pinned vertices) is in CSR."""
     count = free.shape[0]
-    for k in range(count):
+    for k in range(count):  # work = P (rhs - A_fp x_p)
         v = free[k]
-        row = row_permutation[k]
         b0 = rhs[v, 0]
         b1 = rhs[v, 1]
         b2 = rhs[v, 2]
@@ -86,32 +62,58 @@ def _solve_factored(lower_pointer, lower_index, lower_value, lower_diagonal, upp
             b0 -= coupling_value[c] * positions[p, 0]
             b1 -= coupling_value[c] * positions[p, 1]
             b2 -= coupling_value[c] * positions[p, 2]
+        row = permutation[k]
         work[row, 0] = b0
         work[row, 1] = b1
         work[row, 2] = b2
-    _substitute(lower_pointer, lower_index, lower_value, lower_diagonal, False, work)  # L z = Pr b
-    _substitute(upper_pointer, upper_index, upper_value, upper_diagonal, True, work)  # U w = z
-    for k in range(count):  # x = Pc w
-        source = column_permutation[k]
+    for column in range(count):  # L z = work
+        z0 = work[column, 0]
+        z1 = work[column, 1]
+        z2 = work[column, 2]
+        for p in range(pointer[column], pointer[column + 1]):
+            row = index[p]
+            entry = value[p]
+            work[row, 0] -= entry * z0
+            work[row, 1] -= entry * z1
+            work[row, 2] -= entry * z2
+    for column in range(count):  # D y = z
+        scale = 1.0 / diagonal[column]
+        work[column, 0] *= scale
+        work[column, 1] *= scale
+        work[column, 2] *= scale
+    for step in range(count):  # Lᵀ w = y
+        column = count - 1 - step
+        w0 = work[column, 0]
+        w1 = work[column, 1]
+        w2 = work[column, 2]
+        for p in range(pointer[column], pointer[column + 1]):
+            row = index[p]
+            entry = value[p]
+            w0 -= entry * work[row, 0]
+            w1 -= entry * work[row, 1]
+            w2 -= entry * work[row, 2]
+        work[column, 0] = w0
+        work[column, 1] = w1
+        work[column, 2] = w2
+    for k in range(count):  # x = Pᵀ w
+        source = permutation[k]
         v = free[k]
         positions[v, 0] = work[source, 0]
         positions[v, 1] = work[source, 1]
         positions[v, 2] = work[source, 2]
 
 
-def _split_diagonal(matrix) -> tuple:
-    """CSC arrays of the strictly off-diagonal part (int32 indices) and the diagonal."""
+def _strictly_lower(matrix) -> tuple:
+    """CSC arrays (int32 indices) of the strictly lower part of a lower-triangular
+    matrix."""
     matrix = matrix.tocsc()
     matrix.sort_indices()
     size = matrix.shape[0]
     column = np.repeat(np.arange(size), np.diff(matrix.indptr))
-    on_diagonal = matrix.indices == column
-    diagonal = np.ones(size)
-    diagonal[column[on_diagonal]] = matrix.data[on_diagonal]
-    kept = ~on_diagonal
+    kept = matrix.indices > column
     pointer = np.zeros(size + 1, dtype=np.int32)
     np.cumsum(np.bincount(column[kept], minlength=size), out=pointer[1:])
-    return (pointer, matrix.indices[kept].astype(np.int32), matrix.data[kept], diagonal)
+    return pointer, matrix.indices[kept].astype(np.int32), matrix.data[kept]
 
 
 @njit(cache=True)
@@ -162,10 +164,13 @@ class GlobalStep:
         factor = sparse_linalg.splu(reduced, permc_spec='MMD_AT_PLUS_A',
                                     diag_pivot_thresh=0.0,
                                     options={'SymmetricMode': True})
-        self._factors = (_split_diagonal(factor.L) + _split_diagonal(factor.U)
-                         + (factor.perm_r.astype(np.int32), factor.perm_c.astype(np.int32)))
+        # symmetric mode without pivoting permutes rows and columns alike, and then
+        # U = D Lᵀ: L and U's diagonal are all a solve needs
+        if not np.array_equal(factor.perm_r, factor.perm_c):
+            raise RuntimeError('the global step lost its symmetric ordering')
+        self._factors = _strictly_lower(factor.L) + (factor.U.diagonal(),
+                                                     factor.perm_r.astype(np.int32))
         self._work = np.zeros((self.free.size, 3))
-        self.factor_size = int(factor.L.nnz + factor.U.nnz)
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
         """Overwrite the free vertices of ``positions`` with the global step's solution."""

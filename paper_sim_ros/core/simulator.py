@@ -11,8 +11,8 @@ One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps.
 
 'constrained' sub-steps (the default: paper-stiff and real time, SPEC §2):
   # inertia                y = x + h v + h² f_ext / m
-  # implicit springs       projective iterations: local targets and dihedral bending,
-                           prefactored global solve
+  # implicit springs       projective iterations: local targets, prefactored global
+                           solve; after the first, one prefactored bending solve
   # contact                probes (swept) and table, with friction
   # stretch                Gauss–Seidel strain limiting + long-range attachments + contact
   # velocities             v = (x - x_start) / h, so every projection is velocity-consistent
@@ -264,15 +264,15 @@ class Simulator:
         positions += h * velocities
 
     def _projective_step(self, h: float) -> None:
-        """Implicit Euler split in two: bending (one solve of core/bending.py's system from
-        the inertial prediction), then the springs by local/global iterations
-        (core/projective.py) from where bending left the sheet. Keeping the two apart
-        matters: in one system the springs' solver weight, which must be large for paper's
-        stiffness, resists every bending motion until the iterations turn the springs'
-        targets, and a few iterations never do; bending, being near-linear, needs one
-        solve. Every spring aims at its rest length and every hinge at its rest shape, so
-        the sheet keeps its own shape (an aged sheet its waviness); the strain band is
-        then enforced by _limit_strain."""
+        """Implicit Euler split in two: the springs by local/global iterations
+        (core/projective.py), and after the first of them one solve of the bending system
+        (core/bending.py) from where the springs put the sheet; the remaining iterations
+        go on from where bending left it. Keeping the two apart matters: in one system the
+        springs' solver weight, which must be large for paper's stiffness, resists every
+        bending motion until the iterations turn the springs' targets, and a few
+        iterations never do; bending, being near-linear, needs one solve. Every spring aims
+        at its rest length and every hinge at its rest shape, so the sheet keeps its own
+        shape; the strain band is then enforced by _limit_strain."""
         sheet = self.sheet
         solver = self.config.solver
         positions = sheet.positions
@@ -285,10 +285,12 @@ class Simulator:
         rhs = np.empty_like(positions)
         ends = sheet.spring_vertices[self._held_springs]
         rest = sheet.spring_rest_length[self._held_springs]
-        for iteration in range(solver.projective_iterations):
-            local_targets(positions, weighted_inertia, ends, rest, self._global_weight, rhs)
-            self._global_step.solve(rhs, positions)
-            if iteration == 0:
+        for iteration in range(max(solver.projective_iterations, 1)):
+            if solver.projective_iterations:
+                local_targets(positions, weighted_inertia, ends, rest, self._global_weight,
+                              rhs)
+                self._global_step.solve(rhs, positions)
+            if iteration == 0:  # bending, from where the springs put the sheet
                 weighted_inertia[:] = positions * (sheet.vertex_mass / (h * h))[:, None]
                 self._bending.add_targets(positions, weighted_inertia)
                 self._bending_step.solve(weighted_inertia, positions)
