@@ -101,9 +101,6 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('sheet.bending_rigidity', _SHEET.bending_rigidity,
                   'Bending rigidity B of the constrained solver [N*m].', (1.0e-9, 1.0),
                   read_only=True),
-    ParameterSpec('sheet.yield_curvature', _SHEET.yield_curvature,
-                  'Curvature beyond which a hinge keeps part of its bend, with damage on '
-                  '[1/m].', (1.0, 1.0e6), read_only=True),
     ParameterSpec('sheet.aux_stiffness', _SHEET.aux_stiffness,
                   'Stiffness of AUX (damage memory) springs [N/m].', (1.0e-3, 1.0e9),
                   read_only=True),

@@ -257,7 +257,7 @@ def test_global_step_solves_its_system_with_pins():
     pinned[:9] = True
     held = sheet.spring_kind == HINGE
     springs = spring_entries(sheet.spring_vertices[held], np.full(int(np.sum(held)), 200.0))
-    bending = HingeBending(sheet.positions, sheet.triangles, 4e-4, 100.0,
+    bending = HingeBending(sheet.positions, sheet.triangles, 4e-4,
                            np.zeros((0, 2), dtype=np.int32)).matrix_entries()
     h = 1.0 / 60.0
     rng = np.random.default_rng(7)

@@ -121,11 +121,9 @@ def _curvature_in_frame(positions, quads, weights, h, frame, curvature):
 
 
 @njit(cache=True)
-def hinge_rest_state(positions, quads, rigidity, yield_curvature, weights, stiffness,
-                     yield_angle, rest_curvature):
-    """For every hinge at ``positions``: the weights w (H, 4) [1/m], the stiffness k [N·m],
-    the yield angle [rad] (yield curvature × the hinge's width) and κ in the hinge's frame
-    (H, 3) [rad]."""
+def hinge_rest_state(positions, quads, rigidity, weights, stiffness, rest_curvature):
+    """For every hinge at ``positions``: the weights w (H, 4) [1/m], the stiffness k [N·m]
+    and κ in the hinge's frame (H, 3) [rad]."""
     frame = np.empty((3, 3))
     geometry = np.empty((3, 3))
     for h in range(quads.shape[0]):
@@ -149,7 +147,6 @@ def hinge_rest_state(positions, quads, rigidity, yield_curvature, weights, stiff
         weights[h, 3] = -1.0 / height_l
         ratio = 2.0 * edge_length / (height_r + height_l)  # |e|² / (A_r + A_l)
         stiffness[h] = rigidity * min(ratio, MAX_SHAPE_RATIO)
-        yield_angle[h] = yield_curvature * 0.5 * (height_r + height_l)
         _curvature_in_frame(positions, quads, weights, h, frame, rest_curvature[h])
 
 
@@ -167,29 +164,6 @@ def add_bending_targets(positions, quads, weights, stiffness, rest_curvature, hi
                                      + rest_curvature[h, 2] * frame[2, axis])
             for corner in range(4):
                 rhs[quads[h, corner], axis] += weights[h, corner] * target
-
-
-@njit(cache=True)
-def yield_hinges(positions, quads, weights, yield_angle, rest_curvature):
-    """Plastic yield: where |κ - R κ0| exceeds a hinge's yield angle, κ0 follows κ to that
-    distance (perfect plasticity). Returns how many hinges yielded."""
-    frame = np.empty((3, 3))
-    geometry = np.empty((3, 3))
-    curvature = np.empty(3)
-    yielded = 0
-    for h in range(quads.shape[0]):
-        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
-        _curvature_in_frame(positions, quads, weights, h, frame, curvature)
-        size = np.sqrt((curvature[0] - rest_curvature[h, 0]) ** 2
-                       + (curvature[1] - rest_curvature[h, 1]) ** 2
-                       + (curvature[2] - rest_curvature[h, 2]) ** 2)
-        if size > yield_angle[h]:
-            keep = yield_angle[h] / size
-            for row in range(3):
-                rest_curvature[h, row] = curvature[row] \
-                    + keep * (rest_curvature[h, row] - curvature[row])
-            yielded += 1
-    return yielded
 
 
 @njit(cache=True)
@@ -213,8 +187,7 @@ class HingeBending:
     Rebuilt whenever the mesh changes; a hinge that survives keeps its rest shape."""
 
     def __init__(self, positions: np.ndarray, triangles: np.ndarray, rigidity: float,
-                 yield_curvature: float, fold_pairs: np.ndarray,
-                 previous: 'HingeBending | None' = None) -> None:
+                 fold_pairs: np.ndarray, previous: 'HingeBending | None' = None) -> None:
         """``fold_pairs``: (F, 2) vertex pairs of AUX springs; a hinge whose opposite
         vertices are one of them is a fold. A hinge that ``previous`` had, with the same
         opposite vertices and fold state, keeps its weights, stiffness and rest curvature;
@@ -226,12 +199,14 @@ class HingeBending:
                               edge_key(fold_pairs[:, 0], fold_pairs[:, 1], vertex_count))
         self.weights = np.empty((count, 4))
         self.stiffness = np.empty(count)
-        self.yield_angle = np.empty(count)
         self.rest_curvature = np.empty((count, 3))
-        hinge_rest_state(positions, self.quads, rigidity, yield_curvature, self.weights,
-                         self.stiffness, self.yield_angle, self.rest_curvature)
+        hinge_rest_state(positions, self.quads, rigidity, self.weights, self.stiffness,
+                         self.rest_curvature)
         if previous is not None and previous.quads.shape[0] and count:
             self._carry_over(previous)
+        # a fold is a hinge that gave way: its AUX spring holds it (SPEC §4.2), it no
+        # longer bends back
+        self.stiffness[self.folded] = 0.0
         self._find_curved()
 
     def _find_curved(self) -> None:
@@ -248,7 +223,7 @@ class HingeBending:
         same = (old_key[match] == new_key) \
             & np.all(previous.quads[match, 2:] == self.quads[:, 2:], axis=1) \
             & (previous.folded[match] == self.folded)
-        for name in ('weights', 'stiffness', 'yield_angle', 'rest_curvature'):
+        for name in ('weights', 'stiffness', 'rest_curvature'):
             getattr(self, name)[same] = getattr(previous, name)[match[same]]
 
     def matrix_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -263,14 +238,6 @@ class HingeBending:
         """The local step's bending part of the global step's right-hand side."""
         add_bending_targets(positions, self.quads, self.weights, self.stiffness,
                             self.rest_curvature, self._curved, rhs)
-
-    def yield_plastically(self, positions: np.ndarray) -> int:
-        """Bend the rest shape of over-bent hinges (a crease sets); returns their count."""
-        yielded = int(yield_hinges(positions, self.quads, self.weights, self.yield_angle,
-                                   self.rest_curvature))
-        if yielded:
-            self._find_curved()
-        return yielded
 
     def energy(self, positions: np.ndarray) -> float:
         """Σ ½ k |κ - R κ0|² [J]."""

@@ -52,9 +52,6 @@ class SheetConfig:
     bending_rigidity: float = 4.0e-4
     """Bending rigidity B [N·m] of the 'constrained' solver's dihedral hinges
     (core/bending.py): E·t³/12 of office paper, E ≈ 5 GPa along the fibres, t ≈ 0.1 mm."""
-    yield_curvature: float = 100.0
-    """Curvature [1/m] beyond which a hinge yields and keeps part of its bend ('constrained'
-    solver): paper's fibres yield at ~0.5 % strain, κ = 2ε / thickness."""
     bend_damping: float = 2.0e-4
     """Axial damping of BEND springs [N·s/m]."""
     aux_stiffness: float = 3.0e4
@@ -64,7 +61,7 @@ class SheetConfig:
 
     def __post_init__(self) -> None:
         for name in ('width', 'height', 'grammage', 'stretch_stiffness', 'bend_stiffness',
-                     'aux_stiffness', 'bending_rigidity', 'yield_curvature'):
+                     'aux_stiffness', 'bending_rigidity'):
             _finite_positive(name, getattr(self, name))
         for name in ('stretch_damping', 'bend_damping'):
             _finite_non_negative(name, getattr(self, name))

@@ -145,7 +145,6 @@ class Simulator:
                                       self.config.solver.global_stiffness)
         self._bending = HingeBending(sheet.positions, sheet.triangles,
                                      self.config.sheet.bending_rigidity,
-                                     self.config.sheet.yield_curvature,
                                      sheet.spring_vertices[kind == AUX], self._bending)
         h = self.config.solver.dt / self.config.solver.substeps
         if np.any(~sheet.pinned):
@@ -186,9 +185,6 @@ class Simulator:
         substeps = solver.substeps
         h = solver.dt / substeps
         saved_positions = self.sheet.positions.copy()
-        # paper yields where it is bent too sharply: a crease sets (damage, like a break)
-        if self._bending is not None and self.config.damage.enabled:
-            self._bending.yield_plastically(self.sheet.positions)
         probe_path = self.probes.end - self.probes.start
         for sub in range(substeps):
             probe_from = self.probes.start + probe_path * (sub / substeps)
