@@ -255,12 +255,14 @@ def test_same_seed_same_damage_other_seed_other_damage():
 
 
 def test_squeeze_damage_does_not_depend_on_the_substep_count():
-    """Break counts of single runs scatter by ±30 % from seed to seed (each break makes
-    shorter springs at the probe, which see more compression): compare means of 4 seeds.
-    Measured: 9, 16, 13, 20 with 1 sub-step; 10, 20, 12, 24 with 4 (means 14.5 and 16.5)."""
-    one = [squeeze(substeps=1, seed=seed, relax=False)['breaks'] for seed in range(4)]
-    four = [squeeze(substeps=4, seed=seed, relax=False)['breaks'] for seed in range(4)]
-    assert min(one) > 5 and min(four) > 5
+    """Break counts of single runs scatter by ±40 % from seed to seed (each break makes
+    shorter springs at the probe, which see more compression): compare means of 12 seeds,
+    whose standard error is ~9 % (4 seeds' means differ by up to 30 % by chance).
+    Measured: means 14.4 (1 sub-step), 14.5 (2), 13.1 (4)."""
+    seeds = range(12)
+    one = [squeeze(substeps=1, seed=seed, relax=False)['breaks'] for seed in seeds]
+    four = [squeeze(substeps=4, seed=seed, relax=False)['breaks'] for seed in seeds]
+    assert np.mean(one) > 8 and np.mean(four) > 8, (one, four)  # damage worth comparing
     assert abs(np.mean(one) - np.mean(four)) <= 0.25 * max(np.mean(one), np.mean(four)), \
         f'breaks with 1 sub-step: {one}, with 4: {four}'
 

@@ -16,7 +16,8 @@ hinge's own frame (edge, mean normal, their cross product) and R turns that fram
 current one (the local step). B is the bending rigidity [N·m]; k is calibrated so that a
 cylinder bent about a grid axis stores ½ B curvature² per unit area. Rest shapes: the sheet's
 (flat, or the aged fractal); a hinge that damage creates or changes takes its shape at that
-moment: the crease is remembered (SPEC §4).
+moment, at a tenth of the stiffness: the crease is remembered (SPEC §4), and weak. A folded
+hinge (SPEC §4.2) stops bending back: its AUX spring holds it.
 
 Σ k w wᵀ = Q is constant, so the bending step (M/h² + Q) x = M y / h² + Σ k w R κ0 is
 factorised once per mesh change like the springs' global step (core/projective.py), and
@@ -33,6 +34,12 @@ from .topology import edge_key
 FLAT_REST = 1e-9
 """Hinges whose rest |κ0| is below this [rad] rest flat: their target is zero and skipped
 (the whole sheet, until it is aged or damaged)."""
+
+CREASE_STIFFNESS_SHARE = 0.1
+"""Share of the sheet's bending stiffness left to a hinge damage created. At full stiffness
+the creases' remembered bends drive their neighbours over the fold threshold in a
+squeeze on a 129² grid (16 425 folds; 446 at this share, 410 with BEND-spring bending);
+at 0.3 the cascade returns."""
 
 MAX_SHAPE_RATIO = 4.0
 """|e|² / (A_r + A_l) is capped here, and heights are floored at a quarter of the edge: a
@@ -191,7 +198,8 @@ class HingeBending:
         """``fold_pairs``: (F, 2) vertex pairs of AUX springs; a hinge whose opposite
         vertices are one of them is a fold. A hinge that ``previous`` had, with the same
         opposite vertices and fold state, keeps its weights, stiffness and rest curvature;
-        any other is measured now (at reset, with no ``previous``: the rest shape)."""
+        any other is measured now (at reset, with no ``previous``: the rest shape; after
+        damage, a crease: CREASE_STIFFNESS_SHARE)."""
         vertex_count = positions.shape[0]
         self.quads = hinge_quads(triangles, vertex_count)
         count = self.quads.shape[0]
@@ -225,6 +233,8 @@ class HingeBending:
             & (previous.folded[match] == self.folded)
         for name in ('weights', 'stiffness', 'rest_curvature'):
             getattr(self, name)[same] = getattr(previous, name)[match[same]]
+        # a hinge damage made is a crease: its fibres are broken, it bends back weakly
+        self.stiffness[~same] *= CREASE_STIFFNESS_SHARE
 
     def matrix_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, columns, values) [N/m] of Q = Σ k w wᵀ."""
