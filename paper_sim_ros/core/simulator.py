@@ -139,7 +139,7 @@ class Simulator:
         self._near_pin_count = int(np.sum(level.min(axis=1) < NEAR_PIN_LEVELS))
         self._build_attachments()
         # held springs enter the global step with a solver weight; bending has its own step
-        # (BEND springs, second order in the fold angle, only mark the hinges)
+        # (BEND springs, second order in the fold angle, only mark the hinges here)
         self._held_springs = np.flatnonzero(held)
         self._global_weight = np.full(self._held_springs.size,
                                       self.config.solver.global_stiffness)
