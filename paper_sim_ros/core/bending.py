@@ -211,20 +211,18 @@ class HingeBending:
         hinge_rest_state(positions, self.quads, rigidity, self.weights, self.stiffness,
                          self.rest_curvature)
         if previous is not None and previous.quads.shape[0] and count:
-            self._carry_over(previous)
+            self._carry_over(previous, vertex_count)
         # a fold is a hinge that gave way: its AUX spring holds it (SPEC §4.2), it no
         # longer bends back
         self.stiffness[self.folded] = 0.0
-        self._find_curved()
-
-    def _find_curved(self) -> None:
         self._curved = np.flatnonzero(np.abs(self.rest_curvature).max(axis=1, initial=0.0)
                                       > FLAT_REST)
 
-    def _carry_over(self, previous: 'HingeBending') -> None:
-        # a hinge is known by its edge (i < j); vertex indices never change
-        old_key = _edge_key(previous.quads)
-        new_key = _edge_key(self.quads)
+    def _carry_over(self, previous: 'HingeBending', vertex_count: int) -> None:
+        # a hinge is known by its edge; vertex indices never change and only grow, so
+        # keys over the current vertex count identify the previous mesh's edges too
+        old_key = edge_key(previous.quads[:, 0], previous.quads[:, 1], vertex_count)
+        new_key = edge_key(self.quads[:, 0], self.quads[:, 1], vertex_count)
         order = np.argsort(old_key)
         position = np.minimum(np.searchsorted(old_key[order], new_key), order.size - 1)
         match = order[position]
@@ -253,7 +251,3 @@ class HingeBending:
         """Σ ½ k |κ - R κ0|² [J]."""
         return float(bending_energy(positions, self.quads, self.weights, self.stiffness,
                                     self.rest_curvature))
-
-
-def _edge_key(quads: np.ndarray) -> np.ndarray:
-    return (quads[:, 0].astype(np.int64) << 32) | quads[:, 1].astype(np.int64)

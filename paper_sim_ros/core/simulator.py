@@ -136,13 +136,16 @@ class Simulator:
         level = pin_distance_levels(ends, sheet.pinned)[ends]
         order = np.lexsort((level.max(axis=1), level.min(axis=1)))
         self._constraint_springs = constraint_springs[order]
+        self._constraint_ends = sheet.spring_vertices[self._constraint_springs]
+        self._constraint_rest = sheet.spring_rest_length[self._constraint_springs]
         self._near_pin_count = int(np.sum(level.min(axis=1) < NEAR_PIN_LEVELS))
         self._build_attachments()
         # held springs enter the global step with a solver weight; bending has its own step
         # (BEND springs, second order in the fold angle, only mark the hinges here)
-        self._held_springs = np.flatnonzero(held)
-        self._global_weight = np.full(self._held_springs.size,
-                                      self.config.solver.global_stiffness)
+        held_springs = np.flatnonzero(held)
+        self._held_ends = sheet.spring_vertices[held_springs]
+        self._held_rest = sheet.spring_rest_length[held_springs]
+        self._global_weight = np.full(held_springs.size, self.config.solver.global_stiffness)
         self._bending = HingeBending(sheet.positions, sheet.triangles,
                                      self.config.sheet.bending_rigidity,
                                      sheet.spring_vertices[kind == AUX], self._bending)
@@ -152,8 +155,7 @@ class Simulator:
                                             self._bending.matrix_entries(), h)
             self._global_step = GlobalStep(
                 sheet.vertex_mass, sheet.pinned,
-                spring_entries(sheet.spring_vertices[self._held_springs], self._global_weight),
-                h)
+                spring_entries(self._held_ends, self._global_weight), h)
 
     def _build_attachments(self) -> None:
         sheet = self.sheet
@@ -278,25 +280,29 @@ class Simulator:
                       weighted_inertia)
         if self._global_step is None:
             return
+        inertia_weight = (sheet.vertex_mass / (h * h))[:, None]
         rhs = np.empty_like(positions)
-        ends = sheet.spring_vertices[self._held_springs]
-        rest = sheet.spring_rest_length[self._held_springs]
-        for iteration in range(max(solver.projective_iterations, 1)):
-            if solver.projective_iterations:
-                local_targets(positions, weighted_inertia, ends, rest, self._global_weight,
-                              rhs)
-                self._global_step.solve(rhs, positions)
-            if iteration == 0:  # bending, from where the springs put the sheet
-                weighted_inertia[:] = positions * (sheet.vertex_mass / (h * h))[:, None]
-                self._bending.add_targets(positions, weighted_inertia)
-                self._bending_step.solve(weighted_inertia, positions)
-                weighted_inertia[:] = positions * (sheet.vertex_mass / (h * h))[:, None]
+        iterations = solver.projective_iterations
+        if iterations:
+            self._spring_iteration(positions, weighted_inertia, rhs)
+        # bending, from where the springs put the sheet
+        np.multiply(positions, inertia_weight, out=weighted_inertia)
+        self._bending.add_targets(positions, weighted_inertia)
+        self._bending_step.solve(weighted_inertia, positions)
+        np.multiply(positions, inertia_weight, out=weighted_inertia)
+        for _ in range(iterations - 1):
+            self._spring_iteration(positions, weighted_inertia, rhs)
+
+    def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
+        """One local/global iteration of the held springs (core/projective.py)."""
+        local_targets(positions, weighted_inertia, self._held_ends, self._held_rest,
+                      self._global_weight, rhs)
+        self._global_step.solve(rhs, positions)
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
                       inverse_mass) -> None:
         solver = self.config.solver
-        ends = self.sheet.spring_vertices[self._constraint_springs]
-        rest = self.sheet.spring_rest_length[self._constraint_springs]
+        ends, rest = self._constraint_ends, self._constraint_rest
         shortest = 1.0 - solver.max_compression
         longest = 1.0 + solver.max_stretch
         # where the sheet folds away from its pins the strain concentrates (a released
