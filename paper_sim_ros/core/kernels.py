@@ -307,6 +307,45 @@ def project_probes(positions, start_positions, inverse_mass, probe_start, probe_
 
 
 @njit(cache=True)
+def grip_pinched(positions, inverse_mass, probe_center, probe_radius, pressing, ground_height,
+                 grip_probe, grip_offset):
+    """Grip the vertices a pressing probe pinches against the table: within its radius
+    (plus a 2 % margin: they were just pushed to its surface) and at or below the table.
+    A gripped vertex remembers its offset from the probe's centre."""
+    for v in range(positions.shape[0]):
+        if grip_probe[v] >= 0 or inverse_mass[v] == 0.0 or positions[v, 2] > ground_height:
+            continue
+        for p in range(probe_radius.shape[0]):
+            if not pressing[p]:
+                continue
+            dx = positions[v, 0] - probe_center[p, 0]
+            dy = positions[v, 1] - probe_center[p, 1]
+            dz = positions[v, 2] - probe_center[p, 2]
+            if dx * dx + dy * dy + dz * dz <= (1.02 * probe_radius[p]) ** 2:
+                grip_probe[v] = p
+                grip_offset[v, 0] = dx
+                grip_offset[v, 1] = dy
+                grip_offset[v, 2] = dz
+                break
+
+
+@njit(cache=True)
+def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, touched):
+    """Release the vertices of probes no longer pressing; carry the others with their probe
+    (at their gripped offset) and mark them ``touched``."""
+    for v in range(positions.shape[0]):
+        p = grip_probe[v]
+        if p < 0:
+            continue
+        if not pressing[p]:
+            grip_probe[v] = -1
+            continue
+        for k in range(3):
+            positions[v, k] = probe_center[p, k] + grip_offset[v, k]
+        touched[v] = True
+
+
+@njit(cache=True)
 def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
     """Largest |l/l0 - 1| over the springs of one kind."""
     largest = 0.0

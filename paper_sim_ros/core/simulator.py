@@ -66,6 +66,7 @@ class Simulator:
         self.frame = 0
         self.nan_seen = False
         self.probes = Probes()
+        self._release_grips()
         self._bending = None  # rest angles from the initial sheet
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
@@ -114,6 +115,8 @@ class Simulator:
         if self.probes.count == len(centers):
             keep = self.probes.active & active
             start[keep] = self.probes.end[keep]
+        else:
+            self._release_grips()
         self.probes = Probes(radius=radii.copy(), start=start, end=centers.copy(),
                              active=active.copy())
 
@@ -122,6 +125,10 @@ class Simulator:
         constraint sweep order, the long-range attachments and the global step's factor."""
         sheet = self.sheet
         self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
+        # damage only appends vertices: the grips of the old ones stand
+        added = sheet.vertex_count - self._grip_probe.shape[0]
+        self._grip_probe = np.concatenate([self._grip_probe, np.full(added, -1)])
+        self._grip_offset = np.concatenate([self._grip_offset, np.zeros((added, 3))])
         self._global_step = self._bending_step = None
         if self.config.solver.method != 'constrained':
             self._constraint_springs = np.zeros(0, dtype=np.int64)
@@ -149,12 +156,19 @@ class Simulator:
         self._bending = HingeBending(sheet.positions, sheet.triangles,
                                      self.config.sheet.bending_rigidity,
                                      sheet.spring_vertices[kind == AUX], self._bending)
+        self._factor_global_steps()
+
+    def _factor_global_steps(self) -> None:
+        sheet = self.sheet
         h = self.config.solver.dt / self.config.solver.substeps
-        if np.any(~sheet.pinned):
-            self._bending_step = GlobalStep(sheet.vertex_mass, sheet.pinned,
+        held = sheet.pinned | (self._grip_probe >= 0)
+        self._factored_held = held
+        self._global_step = self._bending_step = None
+        if np.any(~held):
+            self._bending_step = GlobalStep(sheet.vertex_mass, held,
                                             self._bending.matrix_entries(), h)
             self._global_step = GlobalStep(
-                sheet.vertex_mass, sheet.pinned,
+                sheet.vertex_mass, held,
                 spring_entries(self._held_ends, self._global_weight), h)
 
     def _build_attachments(self) -> None:
@@ -209,13 +223,14 @@ class Simulator:
         positions, velocities = sheet.positions, sheet.velocities
         start_positions = positions.copy()
         if self.config.solver.method == 'constrained':
-            self._projective_step(h)
+            self._projective_step(h, probe_to)
         else:
             self._force_step(h)
 
         # contact (swept probes, then the table), with friction
         touched = np.zeros(sheet.vertex_count, dtype=bool)
         self._contact(positions, start_positions, probe_from, probe_to, True, touched)
+        self._grip(positions, probe_to, touched)
 
         # stretch: strain limiting, attachments, and contact kept satisfied alongside.
         # A probe is kinematic: what it touches moves with it and the sheet follows, so a
@@ -261,7 +276,7 @@ class Simulator:
         velocities += delta_v
         positions += h * velocities
 
-    def _projective_step(self, h: float) -> None:
+    def _projective_step(self, h: float, probe_to: np.ndarray) -> None:
         """Implicit Euler split in two: the springs by local/global iterations
         (core/projective.py), and after the first of them one solve of the bending system
         (core/bending.py) from where the springs put the sheet; the remaining iterations
@@ -278,6 +293,12 @@ class Simulator:
         inertial_step(positions, sheet.velocities, sheet.pinned, sheet.vertex_mass, h,
                       solver.air_damping, np.asarray(solver.gravity, dtype=np.float64),
                       weighted_inertia)
+        # gripped vertices are where their probe puts them: held in the global steps like
+        # pins, so that the whole sheet, not only its gripped patch, follows the probe
+        gripped = self._grip_probe >= 0
+        if not np.array_equal(gripped | sheet.pinned, self._factored_held):
+            self._factor_global_steps()
+        positions[gripped] = probe_to[self._grip_probe[gripped]] + self._grip_offset[gripped]
         if self._global_step is None:
             return
         inertia_weight = (sheet.vertex_mass / (h * h))[:, None]
@@ -336,6 +357,30 @@ class Simulator:
                                    self.probes.active, contact.probe_friction, with_friction,
                                    touched if touched is not None
                                    else np.zeros(positions.shape[0], dtype=bool))
+
+    def _grip(self, positions, probe_to, touched) -> None:
+        """A probe pressing the sheet into the table pinches it, and where the probe's
+        friction exceeds the table's the pinched patch goes where the probe goes, as paper
+        under a fingertip does. Friction alone cannot say so here: the spring solve pulls a
+        pinched vertex back by more than one step's penetration allows friction to hold,
+        and the probe then slides through the sheet instead of pushing it."""
+        contact = self.config.contact
+        if not (self.probes.count and contact.ground_enabled
+                and contact.probe_friction > contact.ground_friction):
+            self._grip_probe[:] = -1
+            return
+        pressing = self.probes.active & (probe_to[:, 2] - self.probes.radius
+                                         < contact.ground_height)
+        kernels.hold_gripped(positions, probe_to, pressing, self._grip_probe,
+                             self._grip_offset, touched)
+        kernels.grip_pinched(positions, self._inverse_mass, probe_to, self.probes.radius,
+                             pressing, contact.ground_height, self._grip_probe,
+                             self._grip_offset)
+        touched |= self._grip_probe >= 0
+
+    def _release_grips(self) -> None:
+        self._grip_probe = np.full(self.sheet.vertex_count, -1)
+        self._grip_offset = np.zeros((self.sheet.vertex_count, 3))
 
     # ------------------------------------------------------------------------- damage
     def crumple(self, count: int, seed: int) -> None:
