@@ -115,7 +115,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver.constraint_iterations', _SOLVER.constraint_iterations,
                   "Strain-limiting sweeps per sub-step ('constrained' method).", (0, 10000)),
     ParameterSpec('solver.projective_iterations', _SOLVER.projective_iterations,
-                  "Local/global iterations per sub-step ('constrained' method).", (0, 1000)),
+                  "Local/global iterations per sub-step, at least ('constrained' method).",
+                  (0, 1000)),
+    ParameterSpec('solver.projective_max_iterations', _SOLVER.projective_max_iterations,
+                  'Local/global iterations per sub-step at most: beyond the least they go '
+                  'on while a held spring is compressed by more than buckling_compression.',
+                  (0, 1000)),
+    ParameterSpec('solver.buckling_compression', _SOLVER.buckling_compression,
+                  'Compression (1 - l/l0) of a held spring that keeps the local/global '
+                  'iterations going (a squeezed sheet buckles as they go on).', (1.0e-6, 0.99)),
     ParameterSpec('solver.global_stiffness', _SOLVER.global_stiffness,
                   "Weight of the held springs in the global step [N/m] ('constrained'; a "
                   'solver weight, not the material stiffness).', (1.0e-3, 1.0e9)),

@@ -227,6 +227,32 @@ def test_a_fingertip_pressing_the_sheet_onto_the_table_carries_it_along():
     assert np.median(slid_over) < 0.005, 'a slippery fingertip slides over the sheet'
 
 
+@pytest.mark.parametrize('substeps', [1, 4])
+def test_squeeze_arches_the_sheet_between_the_fingertips(substeps):
+    """Two fingertips carry the sheet's ends 44.55 mm inwards each; paper does not shorten,
+    so it buckles up between them (Euler), whatever the sub-step count. Measured on 33²
+    just before lift-off: the middle 89.4 mm (1 sub-step) and 88.7 mm (4) above the table;
+    the short edges' middles 44.0–44.2 mm inwards."""
+    squeeze = scenario('squeeze', grid=33, substeps=substeps)
+    simulator = build_simulator(squeeze)
+    start = simulator.sheet.positions.copy()
+    dt = squeeze.config.solver.dt
+    for frame in range(147):  # to 2.45 s: the probes stopped at 2.5 s, still pressing
+        simulator.set_probes(*squeeze.probe_inputs((frame + 1) * dt))
+        simulator.step_frame()
+    positions = simulator.sheet.positions
+    middle = np.argmin(np.linalg.norm(start[:, :2], axis=1))
+    assert positions[middle, 2] > 0.06, f'the middle is {positions[middle, 2] * 1e3:.1f} mm up'
+    # the short edges follow the fingertips, their corners lagging as the edges bow
+    # (measured: corners 24.2 mm and 32.4 mm inwards)
+    short_edges = np.abs(start[:, 1]) > start[:, 1].max() - 1e-9
+    inwards = np.abs(start[short_edges, 1]) - np.abs(positions[short_edges, 1])
+    edge_middles = short_edges & (np.abs(start[:, 0]) < 1e-9)
+    inwards_middle = np.abs(start[edge_middles, 1]) - np.abs(positions[edge_middles, 1])
+    assert inwards.min() > 0.02 and inwards_middle.min() > 0.03, (inwards, inwards_middle)
+    assert positions[:, 2].min() > -0.0031 and kernels.all_finite(positions)
+
+
 def test_contact_keeps_the_sheet_above_the_table():
     config = SimulationConfig(sheet=SheetConfig(nx=9, ny=9, elevation=0.02),
                               contact=ContactConfig(ground_enabled=True), damage=NO_DAMAGE)

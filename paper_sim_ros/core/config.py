@@ -89,7 +89,14 @@ class SolverConfig:
     jacobi_iterations: int = 10
     """Jacobi iterations of Eq. 6 per sub-step ('paper')."""
     projective_iterations: int = 3
-    """Local/global iterations per sub-step ('constrained')."""
+    """Local/global iterations per sub-step ('constrained'), at least."""
+    projective_max_iterations: int = 15
+    """Local/global iterations per sub-step at most: beyond ``projective_iterations`` they
+    go on while a held spring is compressed by more than ``buckling_compression``."""
+    buckling_compression: float = 0.01
+    """Compression (1 - l/l0) of a held spring that keeps the local/global iterations going
+    (a squeezed sheet buckles as they turn the springs' targets; hanging sheets stay under
+    0.5 %)."""
     global_stiffness: float = 600.0
     """Weight [N/m] of the held springs in the global step ('constrained'). It is a solver
     weight, not the material's E·t: the strain band, not this, holds paper inextensible;
@@ -110,7 +117,8 @@ class SolverConfig:
         _finite_positive('dt', self.dt)
         _require(self.dt <= 0.1, f'dt must be <= 0.1 s, got {self.dt}')
         for name, upper in (('substeps', 10000), ('jacobi_iterations', 100000),
-                            ('projective_iterations', 1000), ('constraint_iterations', 10000)):
+                            ('projective_iterations', 1000), ('projective_max_iterations', 1000),
+                            ('constraint_iterations', 10000)):
             value = getattr(self, name)
             _require(isinstance(value, int) and 0 <= value <= upper,
                      f'{name} must be an integer in [0, {upper}], got {value!r}')
@@ -120,6 +128,8 @@ class SolverConfig:
             _require(math.isfinite(value) and 0 < value < 0.5,
                      f'{name} must be in (0, 0.5), got {value!r}')
         _finite_non_negative('air_damping', self.air_damping)
+        _require(math.isfinite(self.buckling_compression) and 0 < self.buckling_compression < 1,
+                 f'buckling_compression must be in (0, 1), got {self.buckling_compression!r}')
         _finite_positive('global_stiffness', self.global_stiffness)
         _require(len(self.gravity) == 3 and all(math.isfinite(g) for g in self.gravity),
                  f'gravity must be three finite numbers, got {self.gravity!r}')

@@ -364,6 +364,22 @@ def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
 
 
 @njit(cache=True)
+def largest_compression(positions, spring_vertices, rest_length):
+    """Largest 1 − l/l0 over the springs (0 when none is compressed)."""
+    largest = 0.0
+    for s in range(spring_vertices.shape[0]):
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        compression = 1.0 - np.sqrt(dx * dx + dy * dy + dz * dz) / rest_length[s]
+        if compression > largest:
+            largest = compression
+    return largest
+
+
+@njit(cache=True)
 def all_finite(values):
     for x in values.ravel():
         if not np.isfinite(x):

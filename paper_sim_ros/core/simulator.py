@@ -311,7 +311,16 @@ class Simulator:
         self._bending.add_targets(positions, weighted_inertia)
         self._bending_step.solve(weighted_inertia, positions)
         np.multiply(positions, inertia_weight, out=weighted_inertia)
-        for _ in range(iterations - 1):
+        if not iterations:
+            return
+        # Beyond the minimum, iterate while the sheet is squeezed: a compressed flat sheet
+        # leaves its plane only as the iterations turn the springs' targets (each lifts a
+        # bump by l0/l; one implicit step damps the Euler buckling itself), so a squeezed
+        # sheet arches at the pace of the iterations, not of the sub-steps
+        for iteration in range(2, max(iterations, solver.projective_max_iterations) + 1):
+            if iteration > iterations and kernels.largest_compression(
+                    positions, self._held_ends, self._held_rest) < solver.buckling_compression:
+                break
             self._spring_iteration(positions, weighted_inertia, rhs)
 
     def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
