@@ -345,21 +345,25 @@ def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, tou
         touched[v] = True
 
 
+@njit(cache=True, inline='always')
+def _spring_strain(positions, spring_vertices, rest_length, s):
+    """l/l0 − 1 of spring s."""
+    i = spring_vertices[s, 0]
+    j = spring_vertices[s, 1]
+    dx = positions[j, 0] - positions[i, 0]
+    dy = positions[j, 1] - positions[i, 1]
+    dz = positions[j, 2] - positions[i, 2]
+    return np.sqrt(dx * dx + dy * dy + dz * dz) / rest_length[s] - 1.0
+
+
 @njit(cache=True)
 def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
     """Largest |l/l0 - 1| over the springs of one kind."""
     largest = 0.0
     for s in range(spring_vertices.shape[0]):
-        if spring_kind[s] != kind:
-            continue
-        i = spring_vertices[s, 0]
-        j = spring_vertices[s, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        dz = positions[j, 2] - positions[i, 2]
-        strain = abs(np.sqrt(dx * dx + dy * dy + dz * dz) / rest_length[s] - 1.0)
-        if strain > largest:
-            largest = strain
+        if spring_kind[s] == kind:
+            largest = max(largest, abs(_spring_strain(positions, spring_vertices,
+                                                      rest_length, s)))
     return largest
 
 
@@ -368,14 +372,7 @@ def largest_compression(positions, spring_vertices, rest_length):
     """Largest 1 − l/l0 over the springs (0 when none is compressed)."""
     largest = 0.0
     for s in range(spring_vertices.shape[0]):
-        i = spring_vertices[s, 0]
-        j = spring_vertices[s, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        dz = positions[j, 2] - positions[i, 2]
-        compression = 1.0 - np.sqrt(dx * dx + dy * dy + dz * dz) / rest_length[s]
-        if compression > largest:
-            largest = compression
+        largest = max(largest, -_spring_strain(positions, spring_vertices, rest_length, s))
     return largest
 
 
