@@ -90,7 +90,7 @@ class SolverConfig:
     """Jacobi iterations of Eq. 6 per sub-step ('paper')."""
     projective_iterations: int = 3
     """Local/global iterations per sub-step ('constrained'), at least."""
-    projective_max_iterations: int = 15
+    projective_max_iterations: int = 30
     """Local/global iterations per sub-step at most: beyond ``projective_iterations`` they
     go on while a held spring is compressed by more than ``buckling_compression``."""
     buckling_compression: float = 0.01
