@@ -132,7 +132,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('contact.ground_friction', _CONTACT.ground_friction,
                   'Friction coefficient of the table.', (0.0, 10.0)),
     ParameterSpec('contact.probe_friction', _CONTACT.probe_friction,
-                  'Friction coefficient of the probes.', (0.0, 10.0)),
+                  "Friction coefficient of the probes (above the table's, a probe pressed "
+                  'into the table grips the paper).', (0.0, 10.0)),
     ParameterSpec('contact.max_probe_distance', 10.0, 'Probe poses farther than this from the '
                   "origin of frame_id are refused as absurd [m].", (0.01, 1.0e6)),
     ParameterSpec('pin_mode', 'none', f'Pinned vertices, one of {", ".join(PIN_MODES)} '
