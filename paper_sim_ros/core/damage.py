@@ -12,14 +12,16 @@
 Which compression Eq. 7 sees (a decision the paper, written for a soft spring mesh,
 leaves open). With the 'paper' and 'explicit' solvers, springs are forces and Eq. 7 sees
 the literal r = l/l0 at each check. With the 'constrained' solver HINGE springs are held
-within ``max_compression`` (0.4 %) of their rest length, so l/l0 says nothing about how
+within ``max_compression`` (0.3 %) of their rest length, so l/l0 says nothing about how
 hard the sheet is pushed together; and what the projection removes in a sub-step depends
 on the sub-step (measured: 5× more at 1 sub-step than at 4 in the squeeze), because an
 inextensible sheet has no compressive strain to speak of. So there Eq. 7 sees the
 compression the probes impose: over each frame, a vertex touching a probe is pushed by
 the probe's travel along the contact normal, u = max(0, Δc·n) n, of which only the part
-tangent to the sheet counts (pressing on a sheet or lifting it does not compress it; its
-bending is what folds it, §4.2), and a HINGE spring (i, j) is shortened by
+tangent to the sheet counts (the push straight into the sheet does not compress it; its
+bending is what folds it, §4.2; but a probe pressed down into a sheet on a soft table
+pushes the vertices on its slanted sides outwards, and that counts: a fingertip pressed
+3 mm in breaks a few springs around its dimple), and a HINGE spring (i, j) is shortened by
 (u_i − u_j)·(x_j − x_i)/l; summed over the frames since the last check and divided by l0,
 that is 1 − r. It is what the spring would have been compressed
 by had the sheet not moved out of the way: kinematic, so it does not depend on the
@@ -93,7 +95,7 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
     on each listed spring: a vertex within ``reach`` × radius of a probe's end centre is
     pushed by u = max(0, Δc · n) n (Δc: the probe's travel, n: the contact normal), of which
     only the part in the sheet's tangent plane counts (``normals``: the sheet's unit vertex
-    normals; pressing on or lifting the sheet does not compress it); the spring (i, j)
+    normals; a push straight into the sheet does not compress it); the spring (i, j)
     shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
     vertex_count = positions.shape[0]
     push = np.zeros((vertex_count, 3))
