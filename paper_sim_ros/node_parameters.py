@@ -119,7 +119,8 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   (0, 1000)),
     ParameterSpec('solver.projective_max_iterations', _SOLVER.projective_max_iterations,
                   'Local/global iterations per sub-step at most: beyond the least they go '
-                  'on while a held spring is compressed by more than buckling_compression.',
+                  'on while held springs are compressed by more than buckling_compression '
+                  'and each iteration takes 1 % of that out.',
                   (0, 1000)),
     ParameterSpec('solver.buckling_compression', _SOLVER.buckling_compression,
                   'Compression (1 - l/l0) of a held spring that keeps the local/global '

@@ -368,12 +368,13 @@ def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
 
 
 @njit(cache=True)
-def largest_compression(positions, spring_vertices, rest_length):
-    """Largest 1 − l/l0 over the springs (0 when none is compressed)."""
-    largest = 0.0
+def excess_compression(positions, spring_vertices, rest_length, threshold):
+    """Σ max(0, 1 − l/l0 − threshold) over the springs: how squeezed a sheet still is."""
+    total = 0.0
     for s in range(spring_vertices.shape[0]):
-        largest = max(largest, -_spring_strain(positions, spring_vertices, rest_length, s))
-    return largest
+        total += max(0.0, -_spring_strain(positions, spring_vertices, rest_length, s)
+                     - threshold)
+    return total
 
 
 @njit(cache=True)

@@ -33,6 +33,9 @@ from .sheet import AUX, HINGE, Sheet, build_flat_sheet
 NEAR_PIN_LEVELS = 10
 """Springs within this many hops of a pinned vertex get extra strain-limiting sweeps."""
 NEAR_PIN_SWEEPS = 8
+BUCKLING_PROGRESS = 0.01
+"""The share of the springs' compression beyond ``buckling_compression`` an extra
+local/global iteration must take out for the next one to run."""
 
 
 @dataclass
@@ -319,10 +322,16 @@ class Simulator:
         # leaves its plane only as the iterations turn the springs' targets (each lifts a
         # bump by l0/l; one implicit step damps the Euler buckling itself): with 3 a
         # squeezed sheet never arches, with these it does within some 25 frames
+        # They stop once an iteration no longer takes BUCKLING_PROGRESS of the compression
+        # out: a crumpled sheet stays compressed where it cannot buckle any further
+        excess = np.inf
         for iteration in range(2, max(iterations, solver.projective_max_iterations) + 1):
-            if iteration > iterations and kernels.largest_compression(
-                    positions, self._held_ends, self._held_rest) < solver.buckling_compression:
-                break
+            if iteration > iterations:
+                now = kernels.excess_compression(positions, self._held_ends, self._held_rest,
+                                                 solver.buckling_compression)
+                if now == 0.0 or now > (1.0 - BUCKLING_PROGRESS) * excess:
+                    break
+                excess = now
             self._spring_iteration(positions, weighted_inertia, rhs)
 
     def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
