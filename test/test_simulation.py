@@ -231,7 +231,7 @@ def test_a_fingertip_pressing_the_sheet_onto_the_table_carries_it_along():
 def test_squeeze_arches_the_sheet_between_the_fingertips(substeps):
     """Two fingertips carry the sheet's ends 44.55 mm inwards each; paper does not shorten,
     so it buckles up between them (Euler), whatever the sub-step count. Measured on 33²
-    just before lift-off: the middle 89.4 mm (1 sub-step) and 88.7 mm (4) above the table;
+    just before lift-off: the middle 89.6 mm (1 sub-step) and 88.5 mm (4) above the table;
     the short edges' middles 44.0–44.2 mm inwards."""
     squeeze = scenario('squeeze', grid=33, substeps=substeps)
     simulator = build_simulator(squeeze)
@@ -244,7 +244,7 @@ def test_squeeze_arches_the_sheet_between_the_fingertips(substeps):
     middle = np.argmin(np.linalg.norm(start[:, :2], axis=1))
     assert positions[middle, 2] > 0.06, f'the middle is {positions[middle, 2] * 1e3:.1f} mm up'
     # the short edges follow the fingertips, their corners lagging as the edges bow
-    # (measured: corners 24.2 mm and 32.4 mm inwards)
+    # (measured: corners 24.8 mm and 31.2 mm inwards)
     short_edges = np.abs(start[:, 1]) > start[:, 1].max() - 1e-9
     inwards = np.abs(start[short_edges, 1]) - np.abs(positions[short_edges, 1])
     edge_middles = short_edges & (np.abs(start[:, 0]) < 1e-9)
