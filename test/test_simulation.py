@@ -288,7 +288,10 @@ def test_absurd_sheet_parameters_are_refused(field, value):
 
 
 @pytest.mark.parametrize('field, value', [('dt', 0.0), ('dt', 1.0), ('substeps', 0),
-                                          ('method', 'magic'), ('max_stretch', 0.9)])
+                                          ('method', 'magic'), ('max_stretch', 0.9),
+                                          ('projective_max_iterations', -1),
+                                          ('buckling_compression', 0.0),
+                                          ('buckling_compression', float('nan'))])
 def test_absurd_solver_parameters_are_refused(field, value):
     with pytest.raises(ValueError, match=field):
         SolverConfig(**{field: value})
