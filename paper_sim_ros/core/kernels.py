@@ -330,9 +330,9 @@ def grip_pinched(positions, inverse_mass, probe_center, probe_radius, pressing, 
 
 
 @njit(cache=True)
-def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, touched):
+def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset):
     """Release the vertices of probes no longer pressing; carry the others with their probe
-    (at their gripped offset) and mark them ``touched``."""
+    (at their gripped offset)."""
     for v in range(positions.shape[0]):
         p = grip_probe[v]
         if p < 0:
@@ -342,7 +342,6 @@ def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, tou
             continue
         for k in range(3):
             positions[v, k] = probe_center[p, k] + grip_offset[v, k]
-        touched[v] = True
 
 
 @njit(cache=True, inline='always')

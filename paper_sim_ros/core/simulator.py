@@ -321,7 +321,7 @@ class Simulator:
         # Beyond the minimum, iterate while the sheet is squeezed: a compressed flat sheet
         # leaves its plane only as the iterations turn the springs' targets (each lifts a
         # bump by l0/l; one implicit step damps the Euler buckling itself): with 3 a
-        # squeezed sheet never arches, with these it does within some 25 frames
+        # squeezed sheet never arches, with these it does within some 25 frames.
         # They stop once an iteration no longer takes BUCKLING_PROGRESS of the compression
         # out: a crumpled sheet stays compressed where it cannot buckle any further
         excess = np.inf
@@ -392,7 +392,7 @@ class Simulator:
         pressing = self.probes.active & (probe_to[:, 2] - self.probes.radius
                                          < contact.ground_height)
         kernels.hold_gripped(positions, probe_to, pressing, self._grip_probe,
-                             self._grip_offset, touched)
+                             self._grip_offset)
         kernels.grip_pinched(positions, self._inverse_mass, probe_to, self.probes.radius,
                              pressing, contact.ground_height, self._grip_probe,
                              self._grip_offset)
