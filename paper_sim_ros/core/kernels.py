@@ -261,21 +261,44 @@ def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center
 
 @njit(cache=True)
 def project_ground(positions, start_positions, inverse_mass, ground_height, friction,
-                   apply_friction):
-    """Keep vertices above the table plane z = ground_height, with Coulomb friction."""
+                   apply_friction, support):
+    """Keep vertices above the table plane z = ground_height, with Coulomb friction: a
+    vertex's slip along the table is cut by friction × its normal push, which is the depth
+    projected out here plus ``support`` [m], the push the table gave it inside this
+    sub-step's implicit solve (see ``update_table_reaction``)."""
     for v in range(positions.shape[0]):
-        if inverse_mass[v] == 0.0 or positions[v, 2] >= ground_height:
+        if inverse_mass[v] == 0.0:
             continue
         depth = ground_height - positions[v, 2]
-        positions[v, 2] = ground_height
+        if depth <= 0.0 and not (apply_friction and support[v] > 0.0):
+            continue
+        depth = max(depth, 0.0)
+        positions[v, 2] = max(positions[v, 2], ground_height)
         if apply_friction and friction > 0.0:
             tx = positions[v, 0] - start_positions[v, 0]
             ty = positions[v, 1] - start_positions[v, 1]
             slip = np.sqrt(tx * tx + ty * ty)
             if slip > 0.0:
-                keep = max(0.0, 1.0 - friction * depth / slip)
+                keep = max(0.0, 1.0 - friction * (depth + support[v]) / slip)
                 positions[v, 0] = start_positions[v, 0] + keep * tx
                 positions[v, 1] = start_positions[v, 1] + keep * ty
+
+
+@njit(cache=True)
+def update_table_reaction(positions, free, mass_over_h2, ground_height, reaction):
+    """One projected Uzawa step on the table's reaction in an implicit solve (the solve's
+    right-hand side gains ``reaction`` [N] in z): λ_v ← max(0, λ_v + m_v/h² (ground − z_v))
+    over the ``free`` vertices. Returns the largest violation of the contact conditions
+    (z ≥ ground, λ ≥ 0, λ (z − ground) = 0) before the update [m]."""
+    worst = 0.0
+    for v in free:
+        gap = positions[v, 2] - ground_height
+        if gap < 0.0:
+            worst = max(worst, -gap)
+        elif reaction[v] > 0.0:
+            worst = max(worst, min(gap, reaction[v] / mass_over_h2[v]))
+        reaction[v] = max(0.0, reaction[v] - mass_over_h2[v] * gap)
+    return worst
 
 
 @njit(cache=True)

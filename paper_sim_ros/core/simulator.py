@@ -33,6 +33,10 @@ from .sheet import AUX, HINGE, Sheet, build_flat_sheet
 NEAR_PIN_LEVELS = 10
 """Springs within this many hops of a pinned vertex get extra strain-limiting sweeps."""
 NEAR_PIN_SWEEPS = 8
+TABLE_ITERATIONS = 10
+"""Bending solves per sub-step at most while the table's reaction settles."""
+TABLE_TOLERANCE = 1e-6
+"""Contact violation [m] at which the table's reaction counts as settled."""
 BUCKLING_PROGRESS = 0.01
 """The share of the springs' compression beyond ``buckling_compression`` an extra
 local/global iteration must take out for the next one to run."""
@@ -70,6 +74,8 @@ class Simulator:
         self.nan_seen = False
         self.probes = Probes()
         self._release_grips()
+        self._table_reaction = np.zeros(self.sheet.vertex_count)
+        """The table's push on each vertex in the last bending step [N] (a warm start)."""
         self._bending = None  # rest angles from the initial sheet
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
@@ -132,6 +138,7 @@ class Simulator:
         added = sheet.vertex_count - self._grip_probe.shape[0]
         self._grip_probe = np.concatenate([self._grip_probe, np.full(added, -1)])
         self._grip_offset = np.concatenate([self._grip_offset, np.zeros((added, 3))])
+        self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
         self._global_step = self._bending_step = None
         if self.config.solver.method != 'constrained':
             self._constraint_springs = np.zeros(0, dtype=np.int64)
@@ -168,6 +175,7 @@ class Simulator:
         h = self.config.solver.dt / self.config.solver.substeps
         held = sheet.pinned | (self._grip_probe >= 0)
         self._factored_held = held
+        self._table_reaction[held] = 0.0  # held vertices are not the solve's to support
         self._global_step = self._bending_step = None
         if np.any(~held):
             self._bending_step = GlobalStep(sheet.vertex_mass, held,
@@ -234,6 +242,8 @@ class Simulator:
 
         # contact (swept probes, then the table), with friction
         touched = np.zeros(sheet.vertex_count, dtype=bool)
+        # the table's push inside the solve, as a displacement [m]: its friction's share
+        self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
         self._contact(positions, start_positions, probe_from, probe_to, True, touched)
         self._grip(positions, probe_to, touched)
 
@@ -314,7 +324,7 @@ class Simulator:
         # bending, from where the springs put the sheet
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         self._bending.add_targets(positions, weighted_inertia)
-        self._bending_step.solve(weighted_inertia, positions)
+        self._bending_solve(weighted_inertia, positions, inertia_weight[:, 0])
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         if not iterations:
             return
@@ -333,6 +343,27 @@ class Simulator:
                     break
                 excess = now
             self._spring_iteration(positions, weighted_inertia, rhs)
+
+    def _bending_solve(self, rhs, positions, mass_over_h2) -> None:
+        """The bending step with the table's reaction in it. Projecting the solution onto
+        the table afterwards would move only the vertices below it: a bent sheet resting
+        on its low points would be flattened into the table one sub-step after another,
+        since nothing carries the table's push to the rest of it. Here the reaction λ ≥ 0
+        is part of the solve (projected Uzawa iterations, warm-started from the last
+        sub-step), so the push reaches the whole sheet through its bending stiffness."""
+        contact = self.config.contact
+        if not contact.ground_enabled:
+            self._bending_step.solve(rhs, positions)
+            return
+        free = self._bending_step.free
+        inertia_z = rhs[:, 2].copy()
+        for _ in range(TABLE_ITERATIONS):
+            rhs[:, 2] = inertia_z + self._table_reaction
+            self._bending_step.solve(rhs, positions)
+            if kernels.update_table_reaction(positions, free, mass_over_h2,
+                                             contact.ground_height, self._table_reaction) \
+                    < TABLE_TOLERANCE:
+                break
 
     def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
         """One local/global iteration of the held springs (core/projective.py)."""
@@ -370,7 +401,7 @@ class Simulator:
         if contact.ground_enabled:
             kernels.project_ground(positions, start_positions, self._inverse_mass,
                                    contact.ground_height, contact.ground_friction,
-                                   with_friction)
+                                   with_friction, self._table_support)
         if self.probes.count:
             kernels.project_probes(positions, start_positions, self._inverse_mass,
                                    probe_from, probe_to, self.probes.radius,
