@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 from pathlib import Path
 import signal
 import subprocess
@@ -362,8 +363,11 @@ def test_streams_to_a_running_rerun_server(tmp_path):
     rerun_binary = Path(sys.executable).with_name('rerun')
     port = _free_port()
     received = tmp_path / 'received.rrd'
+    # its own session: the `rerun` wrapper starts the real binary as a child, and the
+    # whole group must go at the end, not only the wrapper (an orphan kept serving)
     server = subprocess.Popen([str(rerun_binary), '--port', str(port), '--save', str(received)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              start_new_session=True)
     try:
         time.sleep(2.0)
         assert server.poll() is None, server.stderr.read().decode()[-2000:]
@@ -381,7 +385,7 @@ def test_streams_to_a_running_rerun_server(tmp_path):
         while _logged_frames(received) < scenario.frame_count and time.monotonic() < deadline:
             time.sleep(0.2)
     finally:
-        server.terminate()
+        os.killpg(server.pid, signal.SIGTERM)
         server.wait(10)
     meshes = rerun_replay.read_mesh_frames(str(received))
     assert len(meshes) == scenario.frame_count
