@@ -20,6 +20,7 @@ One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 
@@ -34,7 +35,11 @@ NEAR_PIN_LEVELS = 10
 """Springs within this many hops of a pinned vertex get extra strain-limiting sweeps."""
 NEAR_PIN_SWEEPS = 8
 TABLE_ITERATIONS = 10
-"""Bending solves per sub-step at most while the table's reaction settles."""
+"""Bending solves per sub-step at most while the table's reaction settles. A sheet resting
+on its low points keeps a small violation the later stages of the sub-step bring back (the
+bending step alone is not the whole sub-step), so this is what a sheet on the table pays:
+with 3 or 5 an aged sheet at rest still quivers at 1–30 mm/s (33²), with 10 at under
+0.1 mm/s."""
 TABLE_TOLERANCE = 1e-6
 """Contact violation [m] at which the table's reaction counts as settled."""
 BUCKLING_PROGRESS = 0.01
@@ -305,6 +310,7 @@ class Simulator:
         solver = self.config.solver
         positions = sheet.positions
         weighted_inertia = np.empty_like(positions)
+        self._pressed_in = positions[:, 2] < self.config.contact.ground_height
         inertial_step(positions, sheet.velocities, sheet.pinned, sheet.vertex_mass, h,
                       solver.air_damping, np.asarray(solver.gravity, dtype=np.float64),
                       weighted_inertia)
@@ -349,21 +355,37 @@ class Simulator:
         the table afterwards would move only the vertices below it: a bent sheet resting
         on its low points would be flattened into the table one sub-step after another,
         since nothing carries the table's push to the rest of it. Here the reaction λ ≥ 0
-        is part of the solve (projected Uzawa iterations, warm-started from the last
-        sub-step), so the push reaches the whole sheet through its bending stiffness."""
+        is part of the solve (projected Uzawa iterations with Nesterov's extrapolation,
+        warm-started from the last sub-step), so the push reaches the whole sheet through
+        its bending stiffness."""
         contact = self.config.contact
         if not contact.ground_enabled:
             self._bending_step.solve(rhs, positions)
             return
+        # where a probe pressed the sheet into the table (which yields under it like a desk
+        # mat) the probe, not the table, places it
         free = self._bending_step.free
+        pressed_in = self._pressed_in
+        free = free[~pressed_in[free]]
+        self._table_reaction[pressed_in] = 0.0
         inertia_z = rhs[:, 2].copy()
+        reaction = self._table_reaction
+        trial = reaction.copy()
+        momentum = 1.0
         for _ in range(TABLE_ITERATIONS):
-            rhs[:, 2] = inertia_z + self._table_reaction
+            rhs[:, 2] = inertia_z + trial
             self._bending_step.solve(rhs, positions)
             if kernels.update_table_reaction(positions, free, mass_over_h2,
-                                             contact.ground_height, self._table_reaction) \
-                    < TABLE_TOLERANCE:
+                                             contact.ground_height, trial) < TABLE_TOLERANCE:
+                reaction[:] = trial
                 break
+            # Nesterov's extrapolation (FISTA): the plain projected gradient crawls where
+            # the sheet is stiff between its contacts
+            next_momentum = 0.5 * (1.0 + math.sqrt(1.0 + 4.0 * momentum * momentum))
+            step = trial - reaction
+            reaction[:] = trial
+            np.maximum(trial + (momentum - 1.0) / next_momentum * step, 0.0, out=trial)
+            momentum = next_momentum
 
     def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
         """One local/global iteration of the held springs (core/projective.py)."""
