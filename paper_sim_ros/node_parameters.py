@@ -118,9 +118,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   "Local/global iterations per sub-step, at least ('constrained' method).",
                   (0, 1000)),
     ParameterSpec('solver.projective_max_iterations', _SOLVER.projective_max_iterations,
-                  'Local/global iterations per sub-step at most: beyond the least they go '
-                  'on while held springs are compressed by more than buckling_compression '
-                  'and each iteration takes 1 % of that out.',
+                  'Bounds the extra local/global iterations of a squeezed sheet: beyond the '
+                  'least, up to this minus the least run before the bending solve and as '
+                  'many after it, while held springs are compressed by more than '
+                  'buckling_compression and each iteration takes 1 % of that out.',
                   (0, 1000)),
     ParameterSpec('solver.buckling_compression', _SOLVER.buckling_compression,
                   'Compression (1 - l/l0) of a held spring that keeps the local/global '

