@@ -548,16 +548,13 @@ class DamageModel:
         return np.zeros(sheet.spring_count)
 
     # ------------------------------------------------------------------------ stepping
-    def advance(self, sheet: Sheet, dt: float, probes=None,
-                grip_probe: np.ndarray | None = None) -> bool:
+    def advance(self, sheet: Sheet, dt: float, probes, grip_probe: np.ndarray) -> bool:
         """A frame of ``dt`` has passed (``probes``: where they went in it; ``grip_probe``:
         per vertex, the probe pinching it, or -1); run the checks that fall due. Returns
         True if the mesh changed (the caller must then rebuild what derives from it)."""
         if not self.config.enabled:
             return False
-        if self.held_inextensible and probes is not None and probes.count:
-            if grip_probe is None:
-                grip_probe = np.full(sheet.vertex_count, -1)
+        if self.held_inextensible and probes.count:
             self.observe_probes(sheet, probes, grip_probe)
         self._clock += dt * self.config.check_rate
         periods = int(math.floor(self._clock + 1e-9))
