@@ -21,10 +21,10 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
-from paper_sim_ros.core.damage import relaxed_deviation, ridge_heights  # noqa: E402
+from paper_sim_ros.core import build_simulator, relaxed_deviation  # noqa: E402
+from paper_sim_ros.core.metrics import ridge_heights  # noqa: E402
 from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping,  # noqa: E402
                                           with_overrides)
-from paper_sim_ros.headless import build_simulator  # noqa: E402
 
 
 def run(name: str, grid: int, damage: dict, substeps: int = 1, seed: int = 0):

@@ -21,19 +21,16 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
-from paper_sim_ros.core.scenarios import builtin_mapping, scenario_from_mapping  # noqa: E402
-from paper_sim_ros.headless import build_simulator  # noqa: E402
+from paper_sim_ros.core import build_simulator, load_scenario  # noqa: E402
 from paper_sim_ros.rerun_logger import RerunRecorder  # noqa: E402
 
 
 def run(grid: int, frames: int, path: str | None, hinge_every: int) -> dict:
-    mapping = builtin_mapping('hanging')
-    mapping.setdefault('sheet', {})
-    mapping['sheet'].update({'nx': grid, 'ny': grid})
-    scenario = scenario_from_mapping(mapping)
+    scenario = load_scenario('hanging', grid=grid)
     simulator = build_simulator(scenario)
     dt = scenario.config.solver.dt
-    recorder = RerunRecorder('bench_rerun', path=path, recording_info={'scenario': mapping},
+    recorder = RerunRecorder('bench_rerun', path=path,
+                             recording_info={'scenario': scenario.mapping},
                              hinge_every=hinge_every)
     # warm-up outside the measurement: numba compilation, the first (static) frame's texture
     simulator.step_frame()

@@ -19,9 +19,8 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping,  # noqa: E402
-                                          with_overrides)
-from paper_sim_ros.headless import run_scenario  # noqa: E402
+from paper_sim_ros.core import load_scenario, run_scenario  # noqa: E402
+from paper_sim_ros.core.scenarios import builtin_mapping, with_overrides  # noqa: E402
 from paper_sim_ros.warmup import warm_up  # noqa: E402
 
 SOLVER_OPTIONS = {
@@ -39,7 +38,7 @@ def measure(name: str, grid: int, duration: float, solver: dict, damage: bool) -
     if not damage:
         mapping['damage'] = {'enabled': False}
     frame_seconds: list[float] = []
-    metrics = run_scenario(scenario_from_mapping(mapping),
+    metrics = run_scenario(load_scenario(mapping),
                            on_frame=lambda simulator, seconds: frame_seconds.append(seconds))
     metrics['frame_ms_mean'] = 1e3 * float(np.mean(frame_seconds))
     metrics['frame_ms_p95'] = 1e3 * float(np.percentile(frame_seconds, 95))

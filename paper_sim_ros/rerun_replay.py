@@ -23,14 +23,15 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 import json
-import os
 from typing import Any, Callable
 
 import numpy as np
 
+from .core import Scenario, SimulationConfig, Simulator, build_simulator, run_scenario
+from .core.scenarios import scenario_from_mapping
 from .rerun_logger import (ENTITY_INFO, ENTITY_MESH, ENTITY_METRICS, ENTITY_PROBE_INPUTS,
                            FRAME_TIMELINE, INFO_COMPONENT, PARAMETERS_COMPONENT, TIMELINE,
-                           _jsonable, check_writable_rrd)
+                           RerunRecorder, _jsonable)
 
 POSITIONS = 'Mesh3D:vertex_positions'
 TRIANGLES = 'Mesh3D:triangle_indices'
@@ -242,7 +243,7 @@ class RecordedScenario:
     no recorded input keeps the latest earlier one (Rerun's latest-at); ``exact`` is False then.
     """
 
-    def __init__(self, scenario, inputs: list[ProbeInput]) -> None:
+    def __init__(self, scenario: Scenario, inputs: list[ProbeInput]) -> None:
         if not inputs:
             raise ValueError('the recording has no probe inputs: no frame was recorded')
         self.scenario = scenario
@@ -274,11 +275,9 @@ class RecordedScenario:
         return self.probe_inputs_at_frame(int(round(time / self.config.solver.dt)))
 
 
-def config_from_dict(values: dict):
+def config_from_dict(values: dict) -> SimulationConfig:
     """A ``SimulationConfig`` from ``dataclasses.asdict`` output (as recorded), every nested
     config dataclass included (lists back to tuples where the default is a tuple)."""
-    from .core.config import SimulationConfig
-
     def build(cls, mapping: dict):
         kwargs = {}
         for spec in dataclasses.fields(cls):
@@ -316,7 +315,7 @@ def _differences(rebuilt: Any, recorded: Any, prefix: str = 'config') -> list[st
     return [] if rebuilt == recorded else [f'{prefix}: {recorded!r} recorded, {rebuilt!r} now']
 
 
-def _mapping_from_config(config) -> dict:
+def _mapping_from_config(config: SimulationConfig) -> dict:
     """A scenario mapping holding exactly ``config`` (every config section, and the seed)."""
     mapping: dict[str, Any] = {'name': 'recorded session', 'seed': config.seed}
     for spec in dataclasses.fields(config):
@@ -328,8 +327,6 @@ def _mapping_from_config(config) -> dict:
 
 def recorded_scenario(path: str, chunks: list | None = None) -> RecordedScenario:
     """Rebuild the recorded scenario and check it against the recorded parameters."""
-    from .core.scenarios import scenario_from_mapping
-
     chunks = chunks if chunks is not None else read_chunks(path)
     info = read_recording_info(path, chunks)
     parameters = read_parameters(path, chunks)
@@ -353,12 +350,10 @@ def recorded_scenario(path: str, chunks: list | None = None) -> RecordedScenario
 
 
 def replay(path: str, rrd: str | None = None,
-           on_frame: Callable | None = None) -> dict:
+           on_frame: Callable[[Simulator, float], None] | None = None) -> dict:
     """Re-run a recorded session with its recorded probe inputs; the headless metrics of the
     new run, plus ``replay_of`` (the recording), ``replay_frames`` and ``replay_exact``
     (every frame's input was recorded). ``rrd``: record the new run too."""
-    from .headless import build_simulator, run_scenario
-
     chunks = read_chunks(path)
     scenario = recorded_scenario(path, chunks)
     parameters = read_parameters(path, chunks)
@@ -371,15 +366,12 @@ def replay(path: str, rrd: str | None = None,
     if pinned is not None and np.flatnonzero(simulator.sheet.pinned).tolist() != pinned:
         raise ValueError(f'{path}: the rebuilt sheet pins other vertices than the recording')
     initial = parameters.get('initial_positions_sha256')
-    rebuilt = getattr(simulator, 'initial_sheet', simulator.sheet)  # as the recorder hashed it
-    if initial is not None and rebuilt.positions_sha256() != initial:
+    if initial is not None and simulator.initial_sheet.positions_sha256() != initial:
         raise ValueError(f'{path}: the rebuilt initial sheet differs from the recorded one')
     recorder = None
     if not rrd:
         callback = on_frame
     else:
-        from .rerun_logger import RerunRecorder
-
         info = dict(read_recording_info(path, chunks))
         info['replay_of'] = str(path)
         info.pop('recorder', None)
@@ -401,36 +393,3 @@ def replay(path: str, rrd: str | None = None,
     metrics['replay_frames'] = scenario.frame_count
     metrics['replay_exact'] = scenario.exact
     return metrics
-
-
-def replay_command(args) -> int:
-    """``paper_sim_headless --replay FILE.rrd [--rrd OUT.rrd] [--metrics-json OUT.json]``:
-    the headless runner's replay mode. Exit status 0, 2 on bad input, 130 when interrupted."""
-    import signal
-    import sys
-
-    from .headless import _raise_keyboard_interrupt, check_metrics_path, emit_metrics
-
-    # every other option would change the run the recording describes
-    overrides = [f'--{name.replace("_", "-")}' for name, value in sorted(vars(args).items())
-                 if name not in ('replay', 'rrd', 'metrics_json', 'scenario')
-                 and value is not None and value is not False]
-    try:
-        if overrides:
-            raise ValueError(f'--replay takes the scenario and every parameter from the '
-                             f'recording; it cannot be combined with {", ".join(overrides)}')
-        if not os.path.isfile(args.replay):
-            raise ValueError(f'no such recording: {args.replay}')
-        check_metrics_path(args.metrics_json)
-        if args.rrd:
-            check_writable_rrd(args.rrd)
-        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-        metrics = replay(args.replay, rrd=args.rrd)
-    except (ValueError, OSError) as error:
-        print(f'paper_sim_headless: error: {error}', file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print('paper_sim_headless: interrupted', file=sys.stderr)
-        return 130
-    emit_metrics(metrics, args.metrics_json)
-    return 0

@@ -3,13 +3,13 @@ import numpy as np
 from PIL import Image
 import pytest
 
+from paper_sim_ros.core import AppearanceConfig, Sheet, SheetConfig, vertex_normals
 from paper_sim_ros.core.appearance import (
-    FULL_DETAIL_LEVEL, MAX_TEXTURE_SIDE, AppearanceConfig, PaperAppearance, catmull_rom_weights,
-    level_surface, local_frames, normal_detail, procedural_paper_texture, sample_texture)
-from paper_sim_ros.core.config import SheetConfig
+    FULL_DETAIL_LEVEL, MAX_TEXTURE_SIDE, PaperAppearance, catmull_rom_weights, level_surface,
+    local_frames, normal_detail, procedural_paper_texture, sample_texture)
 from paper_sim_ros.core.fractal import build_aged_sheet
-from paper_sim_ros.core.sheet import Sheet, build_flat_sheet
-from paper_sim_ros.core.topology import check_mesh, vertex_normals
+from paper_sim_ros.core.sheet import build_flat_sheet
+from paper_sim_ros.core.topology import check_mesh
 
 SMALL = SheetConfig(nx=33, ny=33)
 

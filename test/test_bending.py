@@ -5,10 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from paper_sim_ros.core import DamageConfig, SheetConfig, SimulationConfig, Simulator
 from paper_sim_ros.core.bending import HingeBending, hinge_quads
-from paper_sim_ros.core.config import DamageConfig, SheetConfig, SimulationConfig
 from paper_sim_ros.core.sheet import build_flat_sheet
-from paper_sim_ros.core.simulator import Simulator
 from paper_sim_ros.core.topology import NO_VERTEX, mesh_edges
 
 NO_FOLDS = np.zeros((0, 2), dtype=np.int32)

@@ -6,6 +6,7 @@ from pathlib import Path
 import subprocess
 import sys
 
+import pytest
 from sensor_msgs.msg import PointCloud2
 
 from ros_harness import REPO, RosClient, new_domain_id, ros_env, start_node, stop_cleanly
@@ -13,6 +14,7 @@ from ros_harness import REPO, RosClient, new_domain_id, ros_env, start_node, sto
 COLCON = Path(sys.executable).parent / 'colcon'
 
 
+@pytest.mark.slow
 def test_colcon_build_installs_a_runnable_node(tmp_path):
     assert COLCON.exists(), f'colcon is not installed next to {sys.executable} (make setup)'
     leftovers = [REPO / name for name in ('build', 'install', 'log')]

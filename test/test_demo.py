@@ -35,6 +35,7 @@ def test_probe_path_refuses_bad_values():
         ProbePath(start_delay=-1.0)
 
 
+@pytest.mark.slow
 def test_demo_runs_and_says_where_its_recording_is(tmp_path):
     result = subprocess.run(
         [PYTHON, '-m', 'paper_sim_ros.demo', '--duration', '4', '--grid', '9',

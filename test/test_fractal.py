@@ -2,13 +2,12 @@
 import numpy as np
 import pytest
 
-from paper_sim_ros.core.config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig
-from paper_sim_ros.core.damage import plane_deviation
+from paper_sim_ros.core import (BEND, ContactConfig, SheetConfig, SimulationConfig, Simulator,
+                                SolverConfig, plane_deviation)
 from paper_sim_ros.core.fractal import (
     LOWPASS_TAPS, aged_surface, bilinear_upsample, build_aged_sheet, fractal_height_levels,
     fractal_heights, grid_exponent, lowpass_filter, outline_area, restore_side_lengths)
-from paper_sim_ros.core.sheet import BEND, build_flat_sheet
-from paper_sim_ros.core.simulator import Simulator
+from paper_sim_ros.core.sheet import build_flat_sheet
 
 A4 = SheetConfig()
 """Defaults: A4, 65 × 65 vertices (N = 6)."""

@@ -138,6 +138,7 @@ def get_parameter(client, name: str):
 
 
 # ------------------------------------------------------------------------------- outputs
+@pytest.mark.slow
 def test_outputs_arrive_at_the_configured_rates(sim):
     window = 4.0
     since = time.monotonic()
@@ -204,6 +205,7 @@ def test_markers_are_valid_for_rviz(sim):
 
 
 # -------------------------------------------------------------------------------- probes
+@pytest.mark.slow
 def test_a_probe_moves_the_points_under_it_and_letting_go_stops_it(sim):
     reset(sim)
     flat = cloud_positions(fresh_cloud(sim))[:VERTICES]
@@ -320,6 +322,7 @@ def test_invalid_parameter_values_are_refused_with_a_reason(sim):
     assert get_parameter(sim, 'solver.jacobi_iterations') == 12
 
 
+@pytest.mark.slow
 def test_run_time_changes_take_effect(sim):
     """Dense, noisy cloud sampling, pinning, sub-steps and the table, changed while
     running."""
@@ -356,6 +359,7 @@ def test_run_time_changes_take_effect(sim):
     assert np.isfinite(cloud_positions(fresh_cloud(sim))).all()
 
 
+@pytest.mark.slow
 def test_reset_during_contact(sim):
     reset(sim)
     press_for(sim, 1.0)

@@ -75,6 +75,7 @@ def test_an_inconsistent_parameter_set_is_a_clear_startup_error(tmp_path):
     assert 'Traceback' not in result.stderr
 
 
+@pytest.mark.slow
 def test_falling_behind_is_graceful_and_reported(tmp_path):
     """A physics rate the machine cannot follow: frames stay dt apart (the stamps say so),
     the simulation slips behind the clock, outputs keep coming, diagnostics tell."""
@@ -114,6 +115,7 @@ def test_falling_behind_is_graceful_and_reported(tmp_path):
         stop_cleanly(process)
 
 
+@pytest.mark.slow
 def test_several_probes_each_on_its_topic(tmp_path):
     domain = new_domain_id()
     process = start_node(tmp_path, {**SMALL, 'probe_topics': ['probe/left', 'probe/right'],
@@ -159,6 +161,7 @@ def clock_message(seconds: float) -> Clock:
     return message
 
 
+@pytest.mark.slow
 def test_a_catching_up_tick_moves_the_probe_evenly(tmp_path):
     """/clock advances four frames at a time while the probe pose moves 4 cm each time: the
     recorded input of every frame (Rerun) has the probe 1 cm further, not 4 cm then 0."""
@@ -208,6 +211,7 @@ def test_a_catching_up_tick_moves_the_probe_evenly(tmp_path):
                                err_msg='the probe jumped instead of moving a cm a frame')
 
 
+@pytest.mark.slow
 def test_use_sim_time_follows_clock(tmp_path):
     """With use_sim_time the node steps only while /clock advances, and stamps its outputs
     with /clock time."""

@@ -17,8 +17,9 @@ from rerun.chunk import RrdReader
 import yaml
 
 from paper_sim_ros import rerun_replay
+from paper_sim_ros.core import build_simulator, run_scenario
 from paper_sim_ros.core.scenarios import scenario_from_mapping
-from paper_sim_ros.headless import build_simulator, main as headless_main, run_scenario
+from paper_sim_ros.headless import main as headless_main
 from paper_sim_ros.rerun_logger import RerunRecorder
 
 REPO = Path(__file__).resolve().parents[1]
@@ -243,6 +244,7 @@ def test_replay_reproduces_the_recorded_run_with_damage(pinch_recording, tmp_pat
     assert again['recording_info']['replay_of'] == str(path)
 
 
+@pytest.mark.slow
 def test_replay_uses_the_recorded_inputs_not_the_scenario_tracks(tmp_path):
     """A session whose probes wandered off the scenario's keyframes (a person or a robot
     driving them): the replay follows what was recorded."""
@@ -308,6 +310,7 @@ def _headless(*arguments: str, timeout: float = 300.0) -> subprocess.CompletedPr
                           cwd=REPO, capture_output=True, text=True, timeout=timeout)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM],
                          ids=['SIGINT', 'SIGTERM'])
 def test_headless_interrupted_recording_is_complete_and_replayable(tmp_path, signal_number):

@@ -41,6 +41,7 @@ def press(client: RosClient, process, seconds: float) -> None:
     client.spin_for(seconds, every=publish)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM],
                          ids=['SIGINT', 'SIGTERM'])
 def test_node_recording_stopped_by_a_signal_is_complete_and_replays(tmp_path, signal_number):

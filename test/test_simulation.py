@@ -9,14 +9,12 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from paper_sim_ros.core import kernels
-from paper_sim_ros.core.config import (ContactConfig, DamageConfig, SheetConfig,
-                                       SimulationConfig, SolverConfig)
+from paper_sim_ros.core import (BEND, HINGE, ContactConfig, DamageConfig, SheetConfig,
+                                SimulationConfig, Simulator, SolverConfig, build_simulator,
+                                kernels, run_scenario)
 from paper_sim_ros.core.scenarios import builtin_mapping, scenario_from_mapping, with_overrides
-from paper_sim_ros.core.sheet import BEND, HINGE, build_flat_sheet, grid_triangles
-from paper_sim_ros.core.simulator import Simulator
+from paper_sim_ros.core.sheet import build_flat_sheet, grid_triangles
 from paper_sim_ros.core.topology import check_mesh
-from paper_sim_ros.headless import build_simulator, run_scenario
 
 NO_DAMAGE = DamageConfig(enabled=False)
 

@@ -28,15 +28,13 @@ from numba import njit
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from paper_sim_ros.core.appearance import (
-    AppearanceConfig, PaperAppearance, local_frames, sample_texture)
-from paper_sim_ros.core.config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig
-from paper_sim_ros.core.damage import plane_deviation
+from paper_sim_ros.core import (AppearanceConfig, ContactConfig, SheetConfig, SimulationConfig,
+                                Simulator, SolverConfig, plane_deviation)
+from paper_sim_ros.core.appearance import PaperAppearance, local_frames, sample_texture
 from paper_sim_ros.core.fractal import (
     aged_surface, bilinear_upsample, build_aged_sheet, fractal_height_levels, fractal_heights,
     grid_exponent, lowpass_filter, outline_area, restore_side_lengths)
 from paper_sim_ros.core.sheet import grid_triangles
-from paper_sim_ros.core.simulator import Simulator
 
 SUPERSAMPLE = 3
 BACKGROUND = np.array([0.80, 0.82, 0.85])

@@ -36,10 +36,8 @@ FLAT_REST = 1e-9
 (the whole sheet, until it is aged or damaged)."""
 
 CREASE_STIFFNESS_SHARE = 0.1
-"""Share of the sheet's bending stiffness left to a hinge damage created. At full stiffness
-the creases' remembered bends drive their neighbours over the fold threshold in a
-squeeze on a 129² grid (16 425 folds; 446 at this share, 410 with BEND-spring bending);
-at 0.3 the cascade returns."""
+"""Share of the sheet's bending stiffness left to a hinge damage created: stiffer creases
+set off a cascade of folds around them (measured in docs/solver.md)."""
 
 MAX_SHAPE_RATIO = 4.0
 """|e|² / (A_r + A_l) is capped here, and heights are floored at a quarter of the edge: a

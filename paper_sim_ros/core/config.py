@@ -98,8 +98,7 @@ class SolverConfig:
     (the sheet is buckling)."""
     buckling_compression: float = 0.01
     """Compression (1 - l/l0) of a held spring that keeps the local/global iterations going
-    (a squeezed sheet buckles as they turn the springs' targets; hanging sheets stay under
-    0.5 %)."""
+    (a squeezed sheet buckles as they turn the springs' targets; docs/solver.md)."""
     global_stiffness: float = 600.0
     """Weight [N/m] of the held springs in the global step ('constrained'). It is a solver
     weight, not the material's E·t: the strain band, not this, holds paper inextensible;
@@ -162,7 +161,7 @@ class ContactConfig:
 @dataclass(frozen=True)
 class DamageConfig:
     """Breakable hinge springs, hinge folds and random damage (SPEC §4, paper Eq. 7–8).
-    Defaults look like 80 g/m² office paper; see ``damage.MATERIAL_PRESETS``."""
+    Defaults look like 80 g/m² office paper; see ``materials.MATERIAL_PRESETS``."""
 
     enabled: bool = True
     fragility: float = 1.0

@@ -1,5 +1,6 @@
 """numba kernels over flat arrays: spring forces and Jacobians, the Jacobi iteration of
-Eq. 6, stretch projection, contact. Inputs first, outputs last; no Python objects.
+Eq. 6, stretch projection, contact, the compression probes impose (damage, Eq. 7).
+Inputs first, outputs last; no Python objects.
 
 Springs scatter into their two vertices, so every loop over springs runs serially (a
 ``prange`` there would race); the per-vertex loops are independent.
@@ -405,3 +406,75 @@ def all_finite(values):
         if not np.isfinite(x):
             return False
     return True
+
+
+@njit(cache=True)
+def accumulate_probe_compression(positions, normals, spring_vertices, rest_length, springs,
+                                 probe_start, probe_end, probe_radius, probe_active,
+                                 grip_probe, reach, compression):
+    """Add to ``compression[s]`` the compression the probes' motion over one frame imposes
+    on each listed spring (core/probe_compression.py says why this one). Each vertex gets a
+    push u, of which only the part in the sheet's tangent plane counts (``normals``: the
+    sheet's unit vertex normals; a push straight into the sheet does not compress it):
+    - a probe that pinches the sheet against the table (``grip_probe[v] == p`` for some v)
+      pushes the vertices it pinches by its travel Δc;
+    - any other probe pushes a vertex within ``reach`` × radius of its end centre by
+      u = max(0, Δc · n) n (n: the contact normal).
+    The spring (i, j) shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
+    vertex_count = positions.shape[0]
+    probe_count = probe_radius.shape[0]
+    pinching = np.zeros(probe_count, dtype=np.bool_)
+    for v in range(vertex_count):
+        if grip_probe[v] >= 0:
+            pinching[grip_probe[v]] = True
+    push = np.zeros((vertex_count, 3))
+    for p in range(probe_count):
+        if not probe_active[p]:
+            continue
+        limit = reach * probe_radius[p]
+        tx = probe_end[p, 0] - probe_start[p, 0]
+        ty = probe_end[p, 1] - probe_start[p, 1]
+        tz = probe_end[p, 2] - probe_start[p, 2]
+        for v in range(vertex_count):
+            if pinching[p]:
+                if grip_probe[v] != p:
+                    continue
+                ux = tx
+                uy = ty
+                uz = tz
+            else:
+                dx = positions[v, 0] - probe_end[p, 0]
+                dy = positions[v, 1] - probe_end[p, 1]
+                dz = positions[v, 2] - probe_end[p, 2]
+                distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if distance > limit or distance < 1e-12:
+                    continue
+                normal_travel = (tx * dx + ty * dy + tz * dz) / distance
+                if normal_travel <= 0.0:
+                    continue
+                scale = normal_travel / distance
+                ux = scale * dx
+                uy = scale * dy
+                uz = scale * dz
+            across = ux * normals[v, 0] + uy * normals[v, 1] + uz * normals[v, 2]
+            push[v, 0] += ux - across * normals[v, 0]
+            push[v, 1] += uy - across * normals[v, 1]
+            push[v, 2] += uz - across * normals[v, 2]
+    for n in range(springs.shape[0]):
+        s = springs[n]
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        ux = push[i, 0] - push[j, 0]
+        uy = push[i, 1] - push[j, 1]
+        uz = push[i, 2] - push[j, 2]
+        if ux == 0.0 and uy == 0.0 and uz == 0.0:
+            continue
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if length < 1e-12:
+            continue
+        shortening = (ux * dx + uy * dy + uz * dz) / length
+        if shortening > 0.0:
+            compression[s] += shortening / rest_length[s]

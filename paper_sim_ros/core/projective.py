@@ -5,7 +5,8 @@ local and global steps.
   local:  each spring's target vector d_s = its rest length × its current direction;
   global: (M/h² + Σ k_s A_sᵀ A_s) x = M y / h² + Σ k_s A_sᵀ d_s,  y = x + h v + h² f_ext / m.
 
-Bending is solved before, with the same machinery (core/bending.py).
+Bending is solved in between (after the first iteration) with the same machinery
+(core/bending.py); docs/solver.md gives the order of the passes.
 
 The matrix depends only on masses, springs and h, so it is factorised once per mesh
 change and every iteration is two sparse triangular solves: a correction reaches the

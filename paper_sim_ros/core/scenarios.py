@@ -1,37 +1,53 @@
 """Scenarios as data: a sheet, a solver, contact, pins and probe tracks over time.
 
 A scenario is a plain mapping (the same shape as a scenario YAML file), so built-in
-scenarios, user files and recorded sessions all go through one loader:
+scenarios, user files and recorded sessions all go through one loader
+(``core.runner.load_scenario``):
 
     name: press
     description: a fingertip presses the centre of a sheet lying on a table
     duration: 3.0            # s
     seed: 0
-    pin: none                # none | short_edge (the edge at y = -height/2)
-    sheet: {nx: 65, ny: 65}  # any SheetConfig field
+    pin: none                # none | short_edge (see pin_mask)
+    material: cardboard      # optional: printer_paper | cardboard | banknote (core/materials.py)
+    sheet: {nx: 65, ny: 65}  # any SheetConfig field (these win over the material's)
     solver: {dt: 0.0166667}  # any SolverConfig field
-    contact: {ground_enabled: true}
+    contact: {ground_enabled: true}   # any ContactConfig field
+    damage: {fragility: 1.0} # any DamageConfig field (these win over the material's)
+    appearance: {normal_level: 2}     # any AppearanceConfig field
+    crumple: 0               # random damage events before the first frame
     aged: {amplitude: 0.01}  # optional: start from the fractal aged sheet (SPEC §5)
     probes:
       - name: finger
         radius: 0.01         # m
         keyframes: [[0.0, 0.0, 0.0, 0.05], [1.0, 0.0, 0.0, 0.011]]   # [t, x, y, z]
+
+Pin modes (``PIN_MODES``, ``pin_mask``): ``none`` pins nothing; ``short_edge`` clamps the
+edge at y = −height/2 (the lowest material y of the sheet: a short edge of the portrait A4
+sheet, width along x, height along y). The node uses the same definition.
 """
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Any
 
 import numpy as np
 
+from .appearance import AppearanceConfig
 from .config import (ContactConfig, DamageConfig, SheetConfig, SimulationConfig, SolverConfig,
                      from_mapping)
 from .fractal import build_aged_sheet
+from .materials import material_preset
 from .sheet import Sheet, build_flat_sheet
 
 PIN_MODES = ('none', 'short_edge')
+"""What a scenario (and the node) can pin: see ``pin_mask``."""
+
+SCENARIO_KEYS = ('name', 'description', 'duration', 'seed', 'pin', 'material', 'sheet',
+                 'solver', 'contact', 'damage', 'appearance', 'crumple', 'aged', 'probes')
+"""The keys a scenario mapping may have."""
 
 BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
     'hanging': {
@@ -88,6 +104,18 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
 }
 
 
+def pin_mask(sheet: Sheet, mode: str) -> np.ndarray:
+    """(V,) bool: the vertices ``mode`` pins. ``none``: none; ``short_edge``: the edge at
+    y = −height/2, the vertices at the lowest material y (material coordinates, so a vertex
+    that damage inserts on that edge is clamped too)."""
+    if mode not in PIN_MODES:
+        raise ValueError(f'pin mode must be one of {", ".join(PIN_MODES)}, got {mode!r}')
+    if mode == 'short_edge':
+        edge = sheet.material[:, 1].min()
+        return np.isclose(sheet.material[:, 1], edge, rtol=0.0, atol=1e-9)
+    return np.zeros(sheet.vertex_count, dtype=bool)
+
+
 @dataclass(frozen=True)
 class ProbeTrack:
     """A sphere probe moving through keyframes; active from its first to its last one."""
@@ -107,6 +135,8 @@ class ProbeTrack:
 
 @dataclass(frozen=True)
 class Scenario:
+    """A validated scenario: what ``core.runner.build_simulator`` and ``run_scenario`` run."""
+
     name: str
     description: str
     duration: float
@@ -121,6 +151,10 @@ class Scenario:
     """Top-level displacement d_max [m] of the aged (fractal) initial sheet; 0: flat."""
     aged_levels: int | None = None
     """Fractal iterations of the aged sheet (None: all, down to single vertices)."""
+    material: str | None = None
+    """The material preset applied (core/materials.py), or None."""
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
+    """How the sheet looks (texture, shading); no effect on the physics."""
 
     def initial_sheet(self) -> Sheet:
         """The sheet the scenario starts from: flat, or aged (SPEC §5)."""
@@ -134,10 +168,8 @@ class Scenario:
         return int(round(self.duration / self.config.solver.dt))
 
     def pinned_mask(self, sheet: Sheet) -> np.ndarray:
-        if self.pin == 'short_edge':
-            edge = sheet.material[:, 1].min()
-            return np.isclose(sheet.material[:, 1], edge, rtol=0.0, atol=1e-9)
-        return np.zeros(sheet.vertex_count, dtype=bool)
+        """(V,) bool: the vertices of ``sheet`` this scenario pins (``pin_mask``)."""
+        return pin_mask(sheet, self.pin)
 
     def probe_inputs(self, time: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centres (P,3), radii (P,) and active flags (P,) of every probe at ``time``."""
@@ -167,32 +199,46 @@ def _probe_from_mapping(values: dict) -> ProbeTrack:
     return ProbeTrack(name=name, radius=radius, keyframes=keyframes)
 
 
+def _section(mapping: dict, key: str) -> dict:
+    """The mapping under ``key`` ({} when absent or empty)."""
+    value = mapping.get(key) or {}
+    if not isinstance(value, dict):
+        raise ValueError(f'{key} must be a mapping, got {value!r}')
+    return value
+
+
 def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
     """Build and validate a scenario; raises ValueError naming what is wrong."""
     if not isinstance(mapping, dict):
         raise ValueError('a scenario must be a mapping')
-    known = {'name', 'description', 'duration', 'seed', 'pin', 'sheet', 'solver', 'contact',
-             'probes', 'damage', 'crumple', 'aged'}
-    unknown = sorted(set(mapping) - known)
+    unknown = sorted(set(mapping) - set(SCENARIO_KEYS))
     if unknown:
-        raise ValueError(f'unknown scenario keys: {", ".join(unknown)}')
+        raise ValueError(f'unknown scenario keys: {", ".join(unknown)}; '
+                         f'known: {", ".join(SCENARIO_KEYS)}')
     duration = float(mapping.get('duration', 5.0))
     if not (math.isfinite(duration) and 0 < duration <= 3600):
         raise ValueError(f'duration must be in (0, 3600] s, got {duration}')
     pin = mapping.get('pin', 'none')
     if pin not in PIN_MODES:
         raise ValueError(f'pin must be one of {PIN_MODES}, got {pin!r}')
+    material = mapping.get('material')
+    if material is not None and not isinstance(material, str):
+        raise ValueError(f'material must be a name, got {material!r}')
+    # the material's sheet and damage values, each overridden by the scenario's own
+    preset = material_preset(material) if material is not None else {}
     config = SimulationConfig(
-        sheet=from_mapping(SheetConfig, mapping.get('sheet') or {}),
-        solver=from_mapping(SolverConfig, mapping.get('solver') or {}),
-        contact=from_mapping(ContactConfig, mapping.get('contact') or {}),
+        sheet=from_mapping(SheetConfig, {**preset.get('sheet', {}), **_section(mapping, 'sheet')}),
+        solver=from_mapping(SolverConfig, _section(mapping, 'solver')),
+        contact=from_mapping(ContactConfig, _section(mapping, 'contact')),
         seed=int(mapping.get('seed', 0)),
-        damage=from_mapping(DamageConfig, mapping.get('damage') or {}),
+        damage=from_mapping(DamageConfig,
+                            {**preset.get('damage', {}), **_section(mapping, 'damage')}),
     )
+    appearance = from_mapping(AppearanceConfig, _section(mapping, 'appearance'))
     crumple = mapping.get('crumple', 0)
     if not (isinstance(crumple, int) and 0 <= crumple <= 1_000_000):
         raise ValueError(f'crumple must be an integer in [0, 1000000], got {crumple!r}')
-    aged = dict(mapping.get('aged') or {})
+    aged = dict(_section(mapping, 'aged'))
     unknown = sorted(set(aged) - {'amplitude', 'levels'})
     if unknown:
         raise ValueError(f'unknown aged keys: {", ".join(unknown)}')
@@ -204,10 +250,12 @@ def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
                     description=str(mapping.get('description', '')),
                     duration=duration, pin=pin, config=config, probes=probes,
                     mapping=copy.deepcopy(mapping), crumple=crumple,
-                    aged_amplitude=amplitude, aged_levels=aged.get('levels'))
+                    aged_amplitude=amplitude, aged_levels=aged.get('levels'),
+                    material=material, appearance=appearance)
 
 
 def builtin_mapping(name: str) -> dict:
+    """A copy of the built-in scenario ``name``, with its name."""
     if name not in BUILTIN_SCENARIOS:
         raise ValueError(f'unknown scenario {name!r}; built-in: {", ".join(BUILTIN_SCENARIOS)}')
     mapping = copy.deepcopy(BUILTIN_SCENARIOS[name])
@@ -217,11 +265,14 @@ def builtin_mapping(name: str) -> dict:
 
 def with_overrides(mapping: dict, grid: int | None = None, duration: float | None = None,
                    dt: float | None = None, substeps: int | None = None,
-                   seed: int | None = None, method: str | None = None) -> dict:
-    """A copy of ``mapping`` with the command-line overrides applied."""
+                   seed: int | None = None, method: str | None = None,
+                   damage_enabled: bool | None = None, material: str | None = None) -> dict:
+    """A copy of ``mapping`` with the command-line overrides applied (None: unchanged):
+    ``grid`` vertices per side, ``duration`` [s], frame step ``dt`` [s], ``substeps``,
+    ``seed``, solver ``method``, damage on or off, ``material`` preset."""
     mapping = copy.deepcopy(mapping)
-    sheet = dict(mapping.get('sheet') or {})
-    solver = dict(mapping.get('solver') or {})
+    sheet = dict(_section(mapping, 'sheet'))
+    solver = dict(_section(mapping, 'solver'))
     if grid is not None:
         sheet['nx'] = sheet['ny'] = grid
     if dt is not None:
@@ -234,5 +285,9 @@ def with_overrides(mapping: dict, grid: int | None = None, duration: float | Non
         mapping['duration'] = duration
     if seed is not None:
         mapping['seed'] = seed
+    if damage_enabled is not None:
+        mapping['damage'] = {**_section(mapping, 'damage'), 'enabled': damage_enabled}
+    if material is not None:
+        mapping['material'] = material
     mapping['sheet'], mapping['solver'] = sheet, solver
     return mapping

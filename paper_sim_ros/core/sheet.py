@@ -19,7 +19,13 @@ BEND = 1
 """Across an interior edge, between the two vertices opposite it (paper Fig. 6)."""
 AUX = 2
 """Created by damage; rest length frozen at creation; never breaks."""
-SPRING_KIND_NAMES = {HINGE: 'hinge', BEND: 'bend', AUX: 'aux'}
+
+UNDAMAGED = 0
+"""Damage label of a vertex that no damage has touched."""
+CREASED = 1
+"""Damage label of a vertex at an end of an AUX spring (crease or fold memory)."""
+INSERTED = 2
+"""Damage label of a vertex inserted by a break (index >= the initial vertex count)."""
 
 REFERENCE_CELL = 0.297 / 64
 """Cell size [m] at which ``SheetConfig.bend_stiffness`` applies unscaled."""
@@ -165,3 +171,21 @@ def build_flat_sheet(config: SheetConfig) -> Sheet:
     material = grid_material(config)
     rest = np.column_stack([material, np.full(len(material), config.elevation)])
     return sheet_from_rest_shape(config, rest, material, grid_triangles(config.nx, config.ny))
+
+
+def damage_labels(vertex_count: int, spring_vertices: np.ndarray, spring_kind: np.ndarray,
+                  initial_vertex_count: int) -> np.ndarray:
+    """(V,) uint16 label per vertex: INSERTED for vertices added by breaks (index at or past
+    ``initial_vertex_count``: damage only appends vertices), else CREASED where an AUX
+    spring ends, else UNDAMAGED."""
+    if vertex_count < 0 or initial_vertex_count < 0:
+        raise ValueError('vertex counts must be >= 0')
+    spring_vertices = np.asarray(spring_vertices)
+    spring_kind = np.asarray(spring_kind)
+    if spring_vertices.shape != (spring_kind.shape[0], 2):
+        raise ValueError(f'spring_vertices must be (S, 2) with S = {spring_kind.shape[0]}, '
+                         f'got {spring_vertices.shape}')
+    labels = np.full(vertex_count, UNDAMAGED, dtype=np.uint16)
+    labels[spring_vertices[spring_kind == AUX].ravel()] = CREASED
+    labels[initial_vertex_count:] = INSERTED
+    return labels

@@ -1,25 +1,26 @@
 """Steps a sheet: probes in, one frame of physics, state out (SPEC §2–3).
 
-One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps.
+One frame of ``dt`` is cut into ``substeps`` sub-steps of h = dt / substeps; the probes
+sweep along their frame's path, a share per sub-step. docs/solver.md explains every pass.
 
-'paper' (Eq. 1–6) and 'explicit' sub-steps:
-  # forces and Jacobians   spring_system(), every spring a force
-  # velocity step          Eq. 6 Jacobi from Δv⁽⁰⁾ = W_ii⁻¹ h f̃ (or symplectic Euler)
-  # predict positions      x = x + h v
-  # contact                probes (swept) and table, with friction
-  # velocities             v = (x - x_start) / h
+'constrained' sub-step (the default: paper-stiff and real time, SPEC §2), ``_substep``:
+  # inertia      y = x + h v + h² g (air drag), gripped vertices placed with their probe
+  # springs      a local/global iteration, then buckling iterations while it is squeezed
+  # bending      one prefactored bending solve, the table's reaction in it (Uzawa)
+  # springs      the remaining local/global iterations, buckling iterations again
+  # contact      the table, then the swept probes, with friction; grips
+  # stretch      Gauss–Seidel strain limiting, long-range attachments, contact
+  # velocities   v = (x - x_start) / h, so every projection is velocity-consistent
 
-'constrained' sub-steps (the default: paper-stiff and real time, SPEC §2):
-  # inertia                y = x + h v + h² f_ext / m
-  # implicit springs       projective iterations: local targets, prefactored global
-                           solve; after the first, one prefactored bending solve
-  # contact                probes (swept) and table, with friction
-  # stretch                Gauss–Seidel strain limiting + long-range attachments + contact
-  # velocities             v = (x - x_start) / h, so every projection is velocity-consistent
+'paper' (Eq. 1–6) and 'explicit' sub-step: ``_force_step`` (every spring a force; Eq. 6
+Jacobi from Δv⁽⁰⁾ = W_ii⁻¹ h f̃, or symplectic Euler; x += h v), then the same contact and
+velocities (no stretch pass).
+
+After the sub-steps: a non-finite state is rolled back; damage is checked at its own rate
+in simulated time (core/damage.py), never per sub-step.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -28,37 +29,22 @@ from . import kernels
 from .config import SimulationConfig
 from .bending import HingeBending
 from .damage import DamageModel
+from .probes import Probes
 from .projective import GlobalStep, inertial_step, local_targets, spring_entries
-from .sheet import AUX, HINGE, Sheet, build_flat_sheet
+from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
+from .topology import vertex_normals
 
 NEAR_PIN_LEVELS = 10
 """Springs within this many hops of a pinned vertex get extra strain-limiting sweeps."""
 NEAR_PIN_SWEEPS = 8
 TABLE_ITERATIONS = 10
-"""Bending solves per sub-step at most while the table's reaction settles. A sheet resting
-on its low points keeps a small violation the later stages of the sub-step bring back (the
-bending step alone is not the whole sub-step), so this is what a sheet on the table pays:
-with 3 or 5 an aged sheet at rest still quivers at 1–30 mm/s (33²), with 10 at under
-0.1 mm/s."""
+"""Bending solves per sub-step at most while the table's reaction settles; fewer leave a
+sheet at rest on the table quivering (docs/solver.md)."""
 TABLE_TOLERANCE = 1e-6
 """Contact violation [m] at which the table's reaction counts as settled."""
 BUCKLING_PROGRESS = 0.01
 """The share of the springs' compression beyond ``buckling_compression`` an extra
-local/global iteration must take out for the next one to run."""
-
-
-@dataclass
-class Probes:
-    """Sphere probes. Centres in m; ``start`` is where each was at the frame's start."""
-
-    radius: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    start: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    end: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    active: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-
-    @property
-    def count(self) -> int:
-        return int(self.radius.shape[0])
+local/global iteration must take out for the next one to run (docs/solver.md)."""
 
 
 class Simulator:
@@ -219,11 +205,13 @@ class Simulator:
         substeps = solver.substeps
         h = solver.dt / substeps
         saved_positions = self.sheet.positions.copy()
+        # sub-steps, the probes sweeping a share of their frame's path in each
         probe_path = self.probes.end - self.probes.start
         for sub in range(substeps):
             probe_from = self.probes.start + probe_path * (sub / substeps)
             probe_to = self.probes.start + probe_path * ((sub + 1) / substeps)
             self._substep(h, probe_from, probe_to)
+        # nothing non-finite escapes: such a frame is rolled back
         if not (kernels.all_finite(self.sheet.positions)
                 and kernels.all_finite(self.sheet.velocities)):
             self.nan_seen = True
@@ -237,9 +225,11 @@ class Simulator:
         self.frame += 1
 
     def _substep(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray) -> None:
+        """One sub-step of ``h`` [s], the probes moving from ``probe_from`` to ``probe_to``."""
         sheet = self.sheet
         positions, velocities = sheet.positions, sheet.velocities
         start_positions = positions.copy()
+        # inertia, springs and bending: implicit ('constrained') or as forces
         if self.config.solver.method == 'constrained':
             self._projective_step(h, probe_to)
         else:
@@ -311,6 +301,7 @@ class Simulator:
         positions = sheet.positions
         weighted_inertia = np.empty_like(positions)
         self._pressed_in = positions[:, 2] < self.config.contact.ground_height
+        # inertia: the starting iterate y = x + h v + h² g
         inertial_step(positions, sheet.velocities, sheet.pinned, sheet.vertex_mass, h,
                       solver.air_damping, np.asarray(solver.gravity, dtype=np.float64),
                       weighted_inertia)
@@ -326,31 +317,29 @@ class Simulator:
         rhs = np.empty_like(positions)
         iterations = solver.projective_iterations
         extra = solver.projective_max_iterations - iterations
+        # springs: one local/global iteration, and more while the sheet is squeezed
         if iterations:
             self._spring_iteration(positions, weighted_inertia, rhs)
             self._buckling_iterations(positions, weighted_inertia, rhs, extra)
-        # bending, from where the springs put the sheet
+        # bending, from where the springs put the sheet, with the table's reaction
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         self._bending.add_targets(positions, weighted_inertia)
         self._bending_solve(weighted_inertia, positions, inertia_weight[:, 0])
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         if not iterations:
             return
+        # springs: the remaining iterations, from where bending left the sheet
         for _ in range(iterations - 1):
             self._spring_iteration(positions, weighted_inertia, rhs)
         self._buckling_iterations(positions, weighted_inertia, rhs, extra)
 
     def _buckling_iterations(self, positions, weighted_inertia, rhs, most: int) -> None:
-        """Up to ``most`` more local/global iterations while the sheet is squeezed. A
-        compressed flat sheet leaves its plane only as the iterations turn the springs'
-        targets (each lifts a bump by l0/l; one implicit step damps the Euler buckling
-        itself): with 3 iterations a squeezed sheet never arches. They run on both sides
-        of the bending solve: before it, the bump they lift must outgrow what the
-        sub-step's gravity takes from it (h²g, 2.7 mm at h = 1/60 s) before bending and
-        the table see it; with them only after it a squeezed sheet arched some 10 frames
-        later with 1 sub-step than with 4. They stop once an iteration no longer takes
-        BUCKLING_PROGRESS of the compression out: a crumpled sheet stays compressed where
-        it cannot buckle any further."""
+        """Up to ``most`` more local/global iterations while the sheet is squeezed (more
+        than ``buckling_compression``): a compressed flat sheet leaves its plane only as
+        the iterations turn the springs' targets, so this is what lets it buckle. They stop
+        once an iteration no longer takes BUCKLING_PROGRESS of the compression out (a
+        crumpled sheet stays compressed where it cannot buckle any further). Why they run
+        on both sides of the bending solve, with figures: docs/solver.md."""
         buckling_compression = self.config.solver.buckling_compression
         excess = np.inf
         for _ in range(most):
@@ -481,6 +470,18 @@ class Simulator:
     def folds(self) -> int:
         """Edges folded since the last reset."""
         return self.damage.folds
+
+    # -------------------------------------------------------------------------- reads
+    def vertex_normals(self) -> np.ndarray:
+        """(V, 3) float64 area-weighted unit vertex normals of the sheet now."""
+        return vertex_normals(self.sheet.positions, self.sheet.triangles)
+
+    def damage_labels(self) -> np.ndarray:
+        """(V,) uint16 per vertex: 0 intact, 1 on a crease or fold, 2 inserted by a break
+        (``core.sheet.damage_labels``)."""
+        sheet = self.sheet
+        return damage_labels(sheet.vertex_count, sheet.spring_vertices, sheet.spring_kind,
+                             self.initial_sheet.vertex_count)
 
     # ------------------------------------------------------------------------ metrics
     def max_strain(self) -> float:
