@@ -2,9 +2,11 @@
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+# The ROS 2 Jazzy packages of package.xml, as PyPI wheels standing in for a ROS installation
+# (a colcon user has them from ROS, not from pip). Everything else comes from setup.py:
+# install_requires and the 'test' extra.
 ROS_WHEELS := "ros-jazzy-rclpy[fastrtps]" ros-jazzy-visualization-msgs ros-jazzy-sensor-msgs \
 	ros-jazzy-geometry-msgs ros-jazzy-std-srvs ros-jazzy-diagnostic-msgs
-PY_DEPS := numpy numba rerun-sdk==0.41.* pyyaml scipy pytest pillow colcon-core colcon-ros colcon-python-setup-py colcon-package-selection colcon-output colcon-library-path
 
 .PHONY: setup demo test bench clean
 
@@ -13,8 +15,8 @@ setup: $(VENV)/.installed
 $(VENV)/.installed: setup.py package.xml Makefile
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q $(ROS_WHEELS) $(PY_DEPS)
-	$(PY) -m pip install -q --no-deps -e .
+	$(PY) -m pip install -q $(ROS_WHEELS)
+	$(PY) -m pip install -q -e '.[test]'
 	$(PY) -m paper_sim_ros.warmup
 	touch $@
 

@@ -16,7 +16,18 @@ setup(
         (f'share/{package_name}/config', glob('config/*.yaml') + glob('config/*.rviz')),
         (f'share/{package_name}/launch', glob('launch/*.py')),
     ],
-    install_requires=['setuptools', 'numpy', 'numba', 'pyyaml'],
+    # what runs: the core (numpy, numba, scipy; pyyaml for scenario files; pillow for a
+    # texture image file) and Rerun recording (node, headless, replay). package.xml names the
+    # same as rosdep keys, but for numba and rerun-sdk, which have none: without rerun-sdk the
+    # node runs and refuses only to record (README).
+    install_requires=['setuptools', 'numpy', 'numba', 'scipy', 'pyyaml', 'pillow',
+                      'rerun-sdk==0.41.*'],
+    # what only the tests and the linters use (`make setup` installs '.[test]')
+    extras_require={
+        'test': ['pytest', 'import-linter', 'flake8', 'colcon-core', 'colcon-ros',
+                 'colcon-python-setup-py', 'colcon-package-selection', 'colcon-output',
+                 'colcon-library-path'],
+    },
     zip_safe=True,
     maintainer='paper_sim_ros developers',
     maintainer_email='dev@paper-sim-ros.invalid',

@@ -21,17 +21,12 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker
 
+from paper_sim_ros.core.appearance import AppearanceConfig, PaperAppearance
 from paper_sim_ros.core.config import SheetConfig, SimulationConfig
 from paper_sim_ros.core.simulator import Simulator
 from paper_sim_ros.core.topology import vertex_normals
 from paper_sim_ros.msg_adapters.markers import MarkerStyle, sheet_markers, sheet_markers_cdr
 from paper_sim_ros.msg_adapters.point_cloud import create_cloud, sheet_points
-from paper_sim_ros.msg_adapters.surface import damage_labels, lambert_colors
-
-try:
-    from paper_sim_ros.core.appearance import AppearanceConfig, PaperAppearance
-except ImportError:
-    PaperAppearance = None
 
 
 def best_of(repeat: int, function) -> tuple[float, object]:
@@ -88,19 +83,13 @@ def bench_grid(grid: int, repeat: int) -> None:
     simulator = pressed_simulator(grid)
     sheet = simulator.sheet
     header = Header(frame_id='world')
-    appearance = PaperAppearance(AppearanceConfig(), sheet) if PaperAppearance else None
+    appearance = PaperAppearance(AppearanceConfig(), simulator.initial_sheet)  # as the node
     step_seconds, _ = best_of(repeat, simulator.step_frame)
     sheet = simulator.sheet
     normals_seconds, normals = best_of(repeat, lambda: vertex_normals(sheet.positions,
                                                                       sheet.triangles))
-    labels_seconds, labels = best_of(repeat, lambda: damage_labels(
-        sheet.vertex_count, sheet.spring_vertices, sheet.spring_kind, grid * grid))
-    if appearance is not None:
-        colors_seconds, colors = best_of(repeat, lambda: appearance.vertex_colors(sheet))
-        colors_name = 'appearance.vertex_colors'
-    else:
-        colors_seconds, colors = best_of(repeat, lambda: lambert_colors(normals))
-        colors_name = 'lambert_colors (fallback)'
+    labels_seconds, labels = best_of(repeat, simulator.damage_labels)
+    colors_seconds, colors = best_of(repeat, lambda: appearance.vertex_colors(sheet))
     cloud_seconds, cloud = best_of(repeat, lambda: create_cloud(
         header, sheet_points(sheet.positions, normals, labels)))
     cloud_serialize, cloud_bytes = best_of(repeat, lambda: serialize_message(cloud))
@@ -125,7 +114,7 @@ def bench_grid(grid: int, repeat: int) -> None:
     print(f'  physics step_frame                     {1e3 * step_seconds:8.2f} ms')
     print(f'  vertex normals                         {1e3 * normals_seconds:8.2f} ms')
     print(f'  damage labels                          {1e3 * labels_seconds:8.2f} ms')
-    print(f'  colours: {colors_name:29s} {1e3 * colors_seconds:8.2f} ms')
+    print(f'  colours: appearance.vertex_colors      {1e3 * colors_seconds:8.2f} ms')
     print(f'  PointCloud2 build                      {1e3 * cloud_seconds:8.2f} ms')
     print(f'  PointCloud2 serialise                  {1e3 * cloud_serialize:8.2f} ms '
           f'({len(cloud_bytes) / 1e6:.2f} MB)')

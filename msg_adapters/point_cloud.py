@@ -13,7 +13,7 @@ Cloud layout (little endian, ``point_step`` = 28, one row, ``is_dense`` = True):
     12      normal_x   float32   unit vertex normal
     16      normal_y   float32
     20      normal_z   float32
-    24      label      uint16    damage label (see ``surface.damage_labels``)
+    24      label      uint16    damage label (``paper_sim_ros.core.damage_labels``)
     26      (2 bytes padding, zero)
 """
 from __future__ import annotations

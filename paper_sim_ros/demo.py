@@ -19,6 +19,7 @@ from pathlib import Path
 import sys
 import time
 
+from ament_index_python.packages import get_package_share_directory
 import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -31,12 +32,11 @@ from .scripted_probe import ScriptedProbe
 def default_params_file() -> Path:
     """config/paper_sim.yaml: installed (share/paper_sim_ros) or in the source tree."""
     try:
-        from ament_index_python.packages import get_package_share_directory
         installed = Path(get_package_share_directory('paper_sim_ros')) / 'config' / \
             'paper_sim.yaml'
         if installed.is_file():
             return installed
-    except (ImportError, LookupError, ValueError, OSError):
+    except (LookupError, ValueError, OSError):  # not installed: run from the source tree
         pass
     return Path(__file__).resolve().parents[1] / 'config' / 'paper_sim.yaml'
 
@@ -61,11 +61,6 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(arguments.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     recording = '' if arguments.no_record else str(out / 'demo.rrd')
-    try:
-        from . import rerun_logger  # noqa: F401 - recording needs the logger module
-    except ImportError:
-        print('paper_sim demo: Rerun logger not available, not recording', file=sys.stderr)
-        recording = ''
     rclpy.init(args=['--ros-args', '--params-file', str(default_params_file())])
     executor = SingleThreadedExecutor()
     nodes = []
@@ -120,8 +115,8 @@ def _summary(simulation: PaperSimNode, wall_seconds: float) -> str:
             f'{wall_seconds:.1f} s: real-time factor {simulator.time / wall_seconds:.2f}; '
             f'{counters["slipped_frames"]} frames behind the clock, '
             f'{counters["dropped_frames"]} publications dropped), '
-            f'{sheet.vertex_count} vertices, breaks {getattr(simulator, "breaks", 0)}, '
-            f'folds {getattr(simulator, "folds", 0)}, max strain {simulator.max_strain():.2%}, '
+            f'{sheet.vertex_count} vertices, breaks {simulator.breaks}, '
+            f'folds {simulator.folds}, max strain {simulator.max_strain():.2%}, '
             f'all finite: {bool(np.isfinite(sheet.positions).all())}')
 
 

@@ -92,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         on_frame = None
         if args.rrd:
             recorder = RerunRecorder('paper_sim_headless', path=args.rrd,
-                                     recording_info={'scenario': scenario.mapping})
+                                     recording_info={'scenario': scenario.mapping},
+                                     appearance=scenario.appearance)
             on_frame = _recording_callback(recorder, scenario.config.solver.dt)
     except (ValueError, OSError) as error:
         if recorder is not None:

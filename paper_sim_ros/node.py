@@ -41,24 +41,18 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
+from .core.appearance import PaperAppearance
+from .core.scenarios import pin_mask
 from .core.sheet import AUX, BEND, HINGE, Sheet
 from .core.simulator import Simulator
 from .core.topology import vertex_normals
 from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
-from .msg_adapters.surface import damage_labels, lambert_colors
 from .node_runner import run_node
-from .node_parameters import PARAMETER_SPECS, PARAMETERS, NodeSettings, settings_from_values
-
-try:
-    from .core.appearance import AppearanceConfig, PaperAppearance
-except ImportError:  # appearance not built yet: fall back to our own Lambert shading
-    PaperAppearance = None
-try:
-    from .rerun_logger import RerunRecorder
-except ImportError:  # recorder not built yet: recording parameters are refused if set
-    RerunRecorder = None
+from .node_parameters import (PARAMETER_SPECS, PARAMETERS, NodeSettings, declared_defaults,
+                              settings_from_values)
+from .rerun_logger import RerunRecorder
 
 NODE_NAME = 'paper_sim'
 DIAGNOSTIC_NAME = 'paper_sim: simulation'
@@ -133,18 +127,6 @@ class Statistics:
     last_step_seconds: float = 0.0
 
 
-def pin_mask(sheet: Sheet, mode: str) -> np.ndarray:
-    """Vertices to pin for ``mode``: none, or the short edge at +y (in material coordinates,
-    so vertices that damage inserts on that edge are clamped too)."""
-    if mode == 'none':
-        return np.zeros(sheet.vertex_count, dtype=bool)
-    if mode == 'short_edge':
-        y = sheet.material[:, 1]
-        top = float(y.max())
-        return y >= top - 1e-9 * max(1.0, abs(top))
-    raise ValueError(f'unknown pin mode {mode!r}')
-
-
 def _descriptor(spec) -> ParameterDescriptor:
     descriptor = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
     if spec.bounds is not None:
@@ -166,8 +148,16 @@ class PaperSimNode(Node):
     def __init__(self, **node_kwargs) -> None:
         super().__init__(NODE_NAME, **node_kwargs)
         self._recorder = None
+        # the material first: its preset gives the other parameters their defaults
+        material = self.declare_parameter('material', PARAMETER_SPECS['material'].default,
+                                          _descriptor(PARAMETER_SPECS['material'])).value
+        try:
+            defaults = declared_defaults(material)
+        except ValueError as error:
+            raise StartupError(f'invalid parameters: {error}') from None
         for spec in PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            if spec.name != 'material':
+                self.declare_parameter(spec.name, defaults[spec.name], _descriptor(spec))
         self._values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
         try:
             self._settings = settings_from_values(self._values)
@@ -176,11 +166,11 @@ class PaperSimNode(Node):
         settings = self._settings
 
         self.simulator = Simulator(settings.simulation)
-        self._initial_vertex_count = self.simulator.sheet.vertex_count
         self._apply_pins()
-        self._appearance = None
-        if PaperAppearance is not None:
-            self._appearance = PaperAppearance(AppearanceConfig(), self.simulator.sheet)
+        try:
+            self._appearance = PaperAppearance(settings.appearance, self.simulator.sheet)
+        except OSError as error:  # the texture image: missing or not an image
+            raise StartupError(f'cannot load appearance.texture_path: {error}') from None
         self._warm_up()
 
         self._recorder = self._open_recorder(settings)
@@ -228,16 +218,11 @@ class PaperSimNode(Node):
         simulator.set_probes(center[None, :], np.array([0.01]), np.array([True]))
         simulator.step_frame()
         simulator.step_frame()
-        sheet = self.simulator.sheet
-        normals = vertex_normals(sheet.positions, sheet.triangles)
-        self._vertex_colors(sheet, normals)
+        self._appearance.vertex_colors(self.simulator.sheet)
 
     def _open_recorder(self, settings: NodeSettings):
         if not (settings.rerun_path or settings.rerun_connect):
             return None
-        if RerunRecorder is None:
-            raise StartupError('rerun_path / rerun_connect are set but paper_sim_ros.rerun_logger'
-                               ' is not available in this installation')
         try:
             return RerunRecorder('paper_sim_ros', settings.rerun_path or None,
                                  settings.rerun_connect or None,
@@ -419,11 +404,6 @@ class PaperSimNode(Node):
         return Time(nanoseconds=max(0, nanoseconds),
                     clock_type=self.get_clock().clock_type).to_msg()
 
-    def _vertex_colors(self, sheet: Sheet, normals: np.ndarray) -> np.ndarray:
-        if self._appearance is not None:
-            return self._appearance.vertex_colors(sheet)
-        return lambert_colors(normals)
-
     # ------------------------------------------------------------------------ publishing
     def _publish(self) -> None:
         settings = self._settings
@@ -445,14 +425,13 @@ class PaperSimNode(Node):
             return
         header = Header(frame_id=settings.frame_id, stamp=self._stamp())
         normals = vertex_normals(sheet.positions, sheet.triangles)
-        labels = damage_labels(sheet.vertex_count, sheet.spring_vertices, sheet.spring_kind,
-                               self._initial_vertex_count)
+        labels = simulator.damage_labels()
         colors = None
         if want_points:
             self._points_pub.publish(create_cloud(header, self._cloud_points(
                 sheet, normals, labels)))
         if want_markers or recorder is not None:
-            colors = self._vertex_colors(sheet, normals)
+            colors = self._appearance.vertex_colors(sheet)
         if want_markers:
             centers, radii, active = (simulator.probes.end, simulator.probes.radius,
                                       simulator.probes.active)
@@ -487,7 +466,6 @@ class PaperSimNode(Node):
     # -------------------------------------------------------------------------- services
     def _on_reset(self, request, response):
         self.simulator.reset()
-        self._initial_vertex_count = self.simulator.sheet.vertex_count
         self._apply_pins()
         self._origin_ns = None
         self._points_schedule = Schedule(dropped=self._points_schedule.dropped)
@@ -502,16 +480,10 @@ class PaperSimNode(Node):
         return response
 
     def _on_crumple(self, request, response):
-        crumple = getattr(self.simulator, 'crumple', None)
-        if crumple is None:
-            response.success = False
-            response.message = 'crumple is not available: this simulation core has no damage'
-            self.get_logger().warn(response.message)
-            return response
         count = self._settings.crumple_count
         seed = self._settings.crumple_seed + self._crumple_calls
         try:
-            crumple(count, seed)
+            self.simulator.crumple(count, seed)
         except ValueError as error:
             response.success = False
             response.message = f'crumple refused: {error}'
@@ -521,8 +493,7 @@ class PaperSimNode(Node):
         sheet = self.simulator.sheet
         response.success = True
         response.message = (f'crumpled: {count} events, seed {seed}; now '
-                            f'{getattr(self.simulator, "breaks", 0)} breaks, '
-                            f'{getattr(self.simulator, "folds", 0)} folds, '
+                            f'{self.simulator.breaks} breaks, {self.simulator.folds} folds, '
                             f'{sheet.vertex_count} vertices')
         self.get_logger().info(response.message)
         return response
@@ -587,8 +558,8 @@ class PaperSimNode(Node):
             'hinge_springs': int(np.count_nonzero(kind == HINGE)),
             'bend_springs': int(np.count_nonzero(kind == BEND)),
             'aux_springs': int(np.count_nonzero(kind == AUX)),
-            'breaks': int(getattr(simulator, 'breaks', 0)),
-            'folds': int(getattr(simulator, 'folds', 0)),
+            'breaks': int(simulator.breaks),
+            'folds': int(simulator.folds),
             **self.counters(),
             'active_probes': int(np.count_nonzero(simulator.probes.active)),
             'pinned_vertices': int(np.count_nonzero(sheet.pinned)),

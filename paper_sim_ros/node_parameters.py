@@ -5,21 +5,24 @@ enforces; ``read_only`` ones are fixed at start-up (the sheet, the solver method
 topics...). ``settings_from_values`` turns a complete set of values into ``NodeSettings`` or
 raises ``ValueError`` with the reason, which is how run-time changes are validated before
 anything running is touched.
+
+Material presets. ``material`` names a preset of ``core.materials``; the node declares it
+first, and the preset's values become the *defaults* of the ``sheet.*`` and ``damage.*``
+parameters it names (``declared_defaults``). rclpy gives a parameter the value of the
+parameter file or the command line when there is one, else its declared default, so a value
+given explicitly wins over the preset, and ``ros2 param get`` shows what is in use.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 import math
 from typing import Any, Mapping
 
-from .core import config as core_config
-from .core.config import ContactConfig, SheetConfig, SimulationConfig, SolverConfig, SOLVERS
-
-PIN_MODES = ('none', 'short_edge')
-"""``none``: a free sheet; ``short_edge``: the vertices of the short edge at +y are pinned."""
-
-DamageConfig = getattr(core_config, 'DamageConfig', None)
-"""The damage settings of SPEC §4 (None while the core has no damage yet)."""
+from .core.appearance import FULL_DETAIL_LEVEL, AppearanceConfig
+from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
+                          SolverConfig, from_mapping)
+from .core.materials import MATERIAL_PRESETS, material_preset
+from .core.scenarios import PIN_MODES
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,9 @@ class NodeSettings:
     markers_rate: float
     diagnostics_rate: float
     max_catchup_frames: int
+    material: str
+    """The material preset the sheet.* and damage.* defaults came from; '' : none."""
+    appearance: AppearanceConfig
     pin_mode: str
     probe_topics: tuple
     probe_radii: tuple
@@ -63,6 +69,8 @@ class NodeSettings:
 _SHEET = SheetConfig()
 _SOLVER = SolverConfig()
 _CONTACT = ContactConfig()
+_DAMAGE = DamageConfig()
+_APPEARANCE = AppearanceConfig()
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'world', 'Frame of the sheet: of every published header, and the '
@@ -82,6 +90,10 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   (1, 1000)),
     ParameterSpec('seed', 0, 'Seed of every random draw of the simulation (damage, crumple).',
                   (0, 2**62), read_only=True),
+    ParameterSpec('material', '', "Material preset, one of '' (none), "
+                  f'{", ".join(MATERIAL_PRESETS)}: its values become the defaults of the '
+                  'sheet.* and damage.* parameters it names; a value given in the parameter '
+                  'file or on the command line wins.', read_only=True),
     ParameterSpec('sheet.width', _SHEET.width, 'Sheet extent along x [m].', (0.01, 10.0),
                   read_only=True),
     ParameterSpec('sheet.height', _SHEET.height, 'Sheet extent along y [m].', (0.01, 10.0),
@@ -139,7 +151,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('contact.max_probe_distance', 10.0, 'Probe poses farther than this from the '
                   "origin of frame_id are refused as absurd [m].", (0.01, 1.0e6)),
     ParameterSpec('pin_mode', 'none', f'Pinned vertices, one of {", ".join(PIN_MODES)} '
-                  '(short_edge: the short edge at +y is clamped).'),
+                  '(short_edge: the short edge at y = -height/2 is clamped).'),
     ParameterSpec('probe_topics', ['probe/pose'], 'geometry_msgs/PoseStamped topics, one '
                   'sphere probe each.', read_only=True),
     ParameterSpec('probe_radii', [0.02], 'Radius of each probe [m]: one per topic, or one for '
@@ -163,26 +175,52 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   read_only=True),
     ParameterSpec('rerun_connect', '', "Stream to a Rerun viewer at this URL "
                   "(rerun+http://127.0.0.1:9876/proxy); '': off.", read_only=True),
+    ParameterSpec('damage.enabled', _DAMAGE.enabled, 'Breaks and folds happen (SPEC section '
+                  '4).', read_only=True),
+    ParameterSpec('damage.fragility', _DAMAGE.fragility, 'phi of Eq. 7: large is rubbery, '
+                  'small is fragile.', (1e-6, 100.0), read_only=True),
+    ParameterSpec('damage.area_conservation', _DAMAGE.area_conservation, 'psi of Eq. 8.',
+                  (0.0, 2.0), read_only=True),
+    ParameterSpec('damage.fold_threshold', _DAMAGE.fold_threshold, 'An interior edge folds '
+                  'when |x_r - x_l| / d0 falls below this.', (0.0, 0.999), read_only=True),
+    ParameterSpec('damage.max_vertices', _DAMAGE.max_vertices, 'Vertex cap: damage stops '
+                  'there.', (9, 10000000), read_only=True),
+    ParameterSpec('appearance.texture_path', _APPEARANCE.texture_path, 'Image file mapped '
+                  "onto the sheet (any format Pillow reads); '': the procedural paper "
+                  'texture.', read_only=True),
+    ParameterSpec('appearance.normal_level', _APPEARANCE.normal_level, 'Fractal level whose '
+                  'normals light the surface (paper Fig. 10: 2 or 4); above the levels of the '
+                  'grid: the full-detail normals.', (1, FULL_DETAIL_LEVEL), read_only=True),
+    ParameterSpec('appearance.light_direction', list(_APPEARANCE.light_direction),
+                  'Direction towards the light in frame_id: x y z, not all zero (need not be '
+                  'unit length).', read_only=True),
+    ParameterSpec('appearance.ambient', _APPEARANCE.ambient, 'Share of the brightness that '
+                  'does not depend on the light.', (0.0, 1.0), read_only=True),
+    ParameterSpec('appearance.texture_blend', _APPEARANCE.texture_blend, '0: plain white '
+                  'paper, 1: the full texture, in between: the texture mixed with white.',
+                  (0.0, 1.0), read_only=True),
+    ParameterSpec('appearance.texture_seed', _APPEARANCE.texture_seed, 'Seed of the '
+                  'procedural texture.', (0, 2**62), read_only=True),
+    ParameterSpec('appearance.texture_size', _APPEARANCE.texture_size, 'Pixels along the '
+                  'longer side of the procedural texture.', (16, 2048), read_only=True),
 )
-
-_DAMAGE_DESCRIPTIONS = {
-    'enabled': ('Breaks and folds happen (SPEC section 4).', None),
-    'fragility': ('phi of Eq. 7: large is rubbery, small is fragile.', (1e-6, 100.0)),
-    'area_conservation': ('psi of Eq. 8.', (0.0, 2.0)),
-    'fold_threshold': ('An interior edge folds when |x_r - x_l| / d0 falls below this.',
-                       (0.0, 0.999)),
-    'max_vertices': ('Vertex cap: damage stops there.', (9, 10000000)),
-}
-if DamageConfig is not None:
-    _DAMAGE = DamageConfig()
-    PARAMETERS += tuple(
-        ParameterSpec(f'damage.{name}', getattr(_DAMAGE, name), description, bounds,
-                      read_only=True)
-        for name, (description, bounds) in _DAMAGE_DESCRIPTIONS.items()
-        if name in {f.name for f in fields(DamageConfig)})
 
 PARAMETER_NAMES = tuple(spec.name for spec in PARAMETERS)
 PARAMETER_SPECS = {spec.name: spec for spec in PARAMETERS}
+
+
+def declared_defaults(material: str = '') -> dict[str, Any]:
+    """The default every parameter is declared with when the node starts with ``material``:
+    the preset's value for each ``sheet.*`` and ``damage.*`` parameter it names (as the type
+    of the parameter), the table's for the others. ``ValueError`` for an unknown material."""
+    defaults = {spec.name: spec.default for spec in PARAMETERS}
+    defaults['material'] = material
+    if material:
+        for section, values in material_preset(material).items():
+            for field, value in values.items():
+                name = f'{section}.{field}'
+                defaults[name] = type(PARAMETER_SPECS[name].default)(value)
+    return defaults
 
 
 def _section(values: Mapping[str, Any], prefix: str) -> dict:
@@ -210,15 +248,17 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         raise ValueError(f'physics_rate must be > 0, got {physics_rate}')
     solver = _section(values, 'solver.')
     solver['dt'] = 1.0 / physics_rate
-    simulation = {
-        'sheet': core_config.from_mapping(SheetConfig, _section(values, 'sheet.')),
-        'solver': core_config.from_mapping(SolverConfig, solver),
-        'contact': core_config.from_mapping(ContactConfig, _section(values, 'contact.')),
-        'seed': int(values['seed']),
-    }
-    if DamageConfig is not None:
-        simulation['damage'] = core_config.from_mapping(DamageConfig,
-                                                        _section(values, 'damage.'))
+    simulation = SimulationConfig(
+        sheet=from_mapping(SheetConfig, _section(values, 'sheet.')),
+        solver=from_mapping(SolverConfig, solver),
+        contact=from_mapping(ContactConfig, _section(values, 'contact.')),
+        seed=int(values['seed']),
+        damage=from_mapping(DamageConfig, _section(values, 'damage.')),
+    )
+    material = str(values['material'])
+    if material:
+        material_preset(material)  # ValueError naming the known ones
+    appearance = from_mapping(AppearanceConfig, _section(values, 'appearance.'))
     pin_mode = str(values['pin_mode'])
     if pin_mode not in PIN_MODES:
         raise ValueError(f'pin_mode must be one of {", ".join(PIN_MODES)}, got {pin_mode!r}')
@@ -234,13 +274,15 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
     if any(not (math.isfinite(radius) and 0 < radius <= 10.0) for radius in radii):
         raise ValueError(f'probe radii must be in (0, 10] m, got {list(radii)}')
     return NodeSettings(
-        simulation=SimulationConfig(**simulation),
+        simulation=simulation,
         frame_id=frame_id,
         physics_rate=physics_rate,
         publish_rate=_rate(values, 'publish_rate'),
         markers_rate=_rate(values, 'markers_rate'),
         diagnostics_rate=_rate(values, 'diagnostics_rate'),
         max_catchup_frames=int(values['max_catchup_frames']),
+        material=material,
+        appearance=appearance,
         pin_mode=pin_mode,
         probe_topics=topics,
         probe_radii=radii[:len(topics)],

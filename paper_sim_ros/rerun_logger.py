@@ -18,9 +18,13 @@ Entity hierarchy (everything under ``/paper``):
 
 Timelines: ``sim_time`` (duration, seconds of simulated time) and ``frame`` (the simulator's
 frame counter). Imports go one way: this module reads the core, the core never imports rerun.
+
+rerun-sdk is imported only by a recorder that records (``import_rerun``): it has no rosdep
+key, so a ROS installation may lack it, and the node must still run with recording off.
 """
 from __future__ import annotations
 
+import array
 import atexit
 import contextlib
 import dataclasses
@@ -41,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from .core.appearance import AppearanceConfig, PaperAppearance
 from .core.sheet import AUX, HINGE
 from .core.topology import vertex_normals
 
@@ -56,20 +61,33 @@ INFO_COMPONENT = 'recording_info_json'
 PARAMETERS_COMPONENT = 'parameters_json'
 SPRING_COLORS = {HINGE: (120, 140, 175), AUX: (220, 40, 40)}
 PROBE_COLOR = (40, 160, 255)
-PAPER_GREY = np.array([236.0, 233.0, 224.0])
-"""Colour of the sheet when no appearance module is available (slightly warm white)."""
+RERUN_REQUIREMENT = 'rerun-sdk==0.41.*'
+"""The Rerun SDK this package records with (setup.py declares the same)."""
 
 
-def _jsonable(value: Any) -> Any:
-    """Plain JSON types for dataclasses, numpy scalars/arrays, tuples and paths."""
+def import_rerun():
+    """The ``rerun`` module, or a ``RuntimeError`` saying how to install it."""
+    try:
+        import rerun
+    except ModuleNotFoundError as error:
+        if error.name not in ('rerun', 'rerun_bindings', 'pyarrow'):
+            raise
+        raise RuntimeError(f'recording to Rerun needs the Rerun SDK, which is not installed '
+                           f"({error}): pip install '{RERUN_REQUIREMENT}'") from None
+    return rerun
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON types for dataclasses, numpy scalars/arrays, tuples, ``array.array`` (rclpy's
+    array parameters) and paths; non-finite floats as their repr."""
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return _jsonable(dataclasses.asdict(value))
+        return jsonable(dataclasses.asdict(value))
     if isinstance(value, dict):
-        return {str(key): _jsonable(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(item) for item in value]
+        return {str(key): jsonable(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple, array.array)):
+        return [jsonable(item) for item in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, float) and not math.isfinite(value):
@@ -124,18 +142,10 @@ def check_reachable(url: str, timeout: float = 3.0) -> None:
                               f'`rerun` (it listens on port 9876) or record to a file') from None
 
 
-def _shaded_grey(normals: np.ndarray) -> np.ndarray:
-    """(V, 3) uint8: a warm white lit by a fixed light from above (two-sided, Lambert)."""
-    light = np.array([0.3, -0.4, 0.866])
-    lambert = np.abs(normals @ light)
-    return np.clip(PAPER_GREY[None, :] * (0.55 + 0.45 * lambert[:, None]), 0, 255) \
-        .astype(np.uint8)
-
-
 def _segments(positions: np.ndarray, ends: np.ndarray, strip_type):
     """The springs ``ends`` (S, 2) as S two-point line strips, built as one arrow array (the
     SDK's own conversion loops over the strips in Python: ~15x slower at 65x65)."""
-    import pyarrow as pa  # with rerun only: the no-op recorder needs neither
+    import pyarrow as pa  # installed with rerun-sdk (see import_rerun)
 
     points = np.ascontiguousarray(positions[ends], dtype=np.float32).reshape(-1)
     inner = pa.FixedSizeListArray.from_arrays(pa.array(points), type=strip_type.value_type)
@@ -201,36 +211,38 @@ class RerunRecorder:
 
     ``hinge_every``: log the HINGE springs every n-th frame only (they are the mesh edges, the
     heaviest per-frame data); AUX springs, the mesh, probes and metrics go out every frame.
-    ``appearance``: use ``paper_sim_ros.core.appearance`` when importable (texture + texture
-    coordinates); False forces the built-in grey shading.
+    ``appearance``: the paper texture (``core.appearance``) mapped on the mesh of frames logged
+    without ``vertex_colors``; None: ``AppearanceConfig()``.
+
+    Recording needs rerun-sdk: without it a recorder that is asked to record raises
+    ``RuntimeError`` naming the package to install (``import_rerun``).
     """
 
     def __init__(self, application_id: str, path: str | None = None,
                  connect_url: str | None = None, recording_info: dict | None = None,
-                 *, hinge_every: int = 1, appearance: bool = True) -> None:
+                 *, hinge_every: int = 1, appearance: AppearanceConfig | None = None) -> None:
         if not isinstance(hinge_every, int) or hinge_every < 0:
             raise ValueError(f'hinge_every must be an integer >= 0 (0: never), '
                              f'got {hinge_every!r}')
+        rr = import_rerun() if path or connect_url else None  # before creating the file
         self.path = check_writable_rrd(path) if path else None
         self.connect_url = connect_url or None
         self.hinge_every = hinge_every
-        self._use_appearance = appearance
+        self._appearance_config = appearance if appearance is not None else AppearanceConfig()
         self._lock = threading.RLock()
         self._stream = None
         self._closed = False
         self._frames_logged = 0
         self._triangles: np.ndarray | None = None
-        self._appearance = None
+        self._appearance: PaperAppearance | None = None
         self._texture_logged = False
         self._aux_logged = False
         self._parameters_logged = False
         self.close_error: str | None = None
         """Why ``close`` could not deliver everything (a viewer that went away), else None."""
-        self.recording_info = _jsonable(recording_info or {})
-        if self.path is None and self.connect_url is None:
+        self.recording_info = jsonable(recording_info or {})
+        if rr is None:
             return
-        import rerun as rr
-
         if self.connect_url is not None:
             check_reachable(self.connect_url)
         stream = rr.RecordingStream(application_id, recording_id=uuid.uuid4(),
@@ -280,10 +292,6 @@ class RerunRecorder:
         """True while this recorder writes somewhere."""
         return self._stream is not None and not self._closed
 
-    @property
-    def frames_logged(self) -> int:
-        return self._frames_logged
-
     # ---------------------------------------------------------------------------- logging
     def log_frame(self, sim_time: float, simulator, vertex_colors: np.ndarray | None = None,
                   scalars: dict[str, float] | None = None) -> None:
@@ -332,15 +340,14 @@ class RerunRecorder:
 
     def _set_time(self, sim_time: float, simulator) -> None:
         self._stream.set_time(TIMELINE, duration=float(sim_time))
-        self._stream.set_time(FRAME_TIMELINE, sequence=int(getattr(simulator, 'frame', 0)))
+        self._stream.set_time(FRAME_TIMELINE, sequence=int(simulator.frame))
 
     def _log_parameters(self, simulator) -> None:
         rr = self._rr
-        config = getattr(simulator, 'config', None)
         # the sheet the run started from (the simulator's reset state), not this frame's
-        initial = getattr(simulator, 'initial_sheet', simulator.sheet)
+        initial = simulator.initial_sheet
         parameters = {
-            'config': _jsonable(config) if config is not None else None,
+            'config': jsonable(simulator.config),
             'initial_vertex_count': int(initial.vertex_count),
             'pinned_vertices': np.flatnonzero(initial.pinned).tolist(),
             'initial_positions_sha256': initial.positions_sha256(),
@@ -348,15 +355,6 @@ class RerunRecorder:
         text = json.dumps(parameters, sort_keys=True)
         self._stream.log(ENTITY_INFO, rr.AnyValues(**{PARAMETERS_COMPONENT: text}), static=True)
         self._parameters_logged = True
-
-    def _paper_appearance(self, sheet):
-        if self._appearance is None and self._use_appearance:
-            try:
-                from .core.appearance import AppearanceConfig, PaperAppearance
-                self._appearance = PaperAppearance(AppearanceConfig(), sheet)
-            except ImportError:
-                self._use_appearance = False
-        return self._appearance
 
     def _log_mesh(self, sheet, vertex_colors: np.ndarray | None) -> None:
         rr = self._rr
@@ -369,11 +367,13 @@ class RerunRecorder:
             'vertex_positions': positions.astype(np.float32),
             'vertex_normals': normals,
         }
-        appearance = self._paper_appearance(sheet) if vertex_colors is None else None
+        appearance = None
         if vertex_colors is not None:
             fields['vertex_colors'] = np.asarray(vertex_colors, dtype=np.uint8)
-        elif appearance is None:
-            fields['vertex_colors'] = _shaded_grey(normals)
+        else:
+            if self._appearance is None:
+                self._appearance = PaperAppearance(self._appearance_config, sheet)
+            appearance = self._appearance
         if changed:
             fields['triangle_indices'] = triangles.astype(np.uint32)
             if appearance is not None:
@@ -423,8 +423,8 @@ class RerunRecorder:
             values['energy'] = simulator.energy()
         if 'max_strain' not in values:
             values['max_strain'] = simulator.max_strain()
-        values.setdefault('breaks', getattr(simulator, 'breaks', 0))
-        values.setdefault('folds', getattr(simulator, 'folds', 0))
+        values.setdefault('breaks', simulator.breaks)
+        values.setdefault('folds', simulator.folds)
         values.setdefault('vertices', simulator.sheet.vertex_count)
         for name, value in values.items():
             self._stream.log(f'{ENTITY_METRICS}/{name}', rr.Scalars(float(value)))
@@ -487,13 +487,10 @@ def _signals_deferred():
 
 
 def _rclpy_handles_signals() -> bool:
-    signals = sys.modules.get('rclpy.signals')
+    signals = sys.modules.get('rclpy.signals')  # not imported: rclpy is not in use
     if signals is None:
         return False
-    try:
-        return signals.get_current_signal_handlers_options() != signals.SignalHandlerOptions.NO
-    except Exception:  # unknown rclpy version: leave its signal handling alone
-        return True
+    return signals.get_current_signal_handlers_options() != signals.SignalHandlerOptions.NO
 
 
 def _close_at_exit(method: weakref.WeakMethod) -> None:

@@ -31,7 +31,7 @@ from .core import Scenario, SimulationConfig, Simulator, build_simulator, run_sc
 from .core.scenarios import scenario_from_mapping
 from .rerun_logger import (ENTITY_INFO, ENTITY_MESH, ENTITY_METRICS, ENTITY_PROBE_INPUTS,
                            FRAME_TIMELINE, INFO_COMPONENT, PARAMETERS_COMPONENT, TIMELINE,
-                           RerunRecorder, _jsonable)
+                           RerunRecorder, jsonable)
 
 POSITIONS = 'Mesh3D:vertex_positions'
 TRIANGLES = 'Mesh3D:triangle_indices'
@@ -341,7 +341,7 @@ def recorded_scenario(path: str, chunks: list | None = None) -> RecordedScenario
     scenario = scenario_from_mapping(mapping)
     recorded = parameters.get('config')
     if recorded is not None:
-        differences = _differences(_jsonable(scenario.config), recorded)
+        differences = _differences(jsonable(scenario.config), recorded)
         if differences:
             raise ValueError(f'{path}: the scenario rebuilt from the recording does not have '
                              f'the recorded parameters ({"; ".join(differences[:5])}): the code '
@@ -375,7 +375,8 @@ def replay(path: str, rrd: str | None = None,
         info = dict(read_recording_info(path, chunks))
         info['replay_of'] = str(path)
         info.pop('recorder', None)
-        recorder = RerunRecorder('paper_sim_replay', path=rrd, recording_info=info)
+        recorder = RerunRecorder('paper_sim_replay', path=rrd, recording_info=info,
+                                 appearance=scenario.appearance)
         dt = scenario.config.solver.dt
 
         def callback(sim, step_seconds: float) -> None:

@@ -9,8 +9,8 @@ its clock (wall clock or ``/clock``), so it is the same in every run: for ``star
 seconds nothing (the probe is away), then in every ``period`` it goes approach →
 press_start → press_end → retreat → approach, easing in and out of each leg.
 
-The defaults suit the demo: an A4 sheet clamped at its short edge at y = +0.1485 m hangs
-down; the probe pushes 1.5 cm into its hanging part from the -y side and drags along x.
+The defaults suit the demo: an A4 sheet clamped at its short edge at y = -0.1485 m hangs
+down; the probe pushes 1.5 cm into its hanging part from the +y side and drags along x.
 """
 from __future__ import annotations
 
@@ -34,10 +34,10 @@ press_end→retreat, retreat→approach."""
 class ProbePath:
     """Waypoints of the probe centre [m] in the sheet frame, and the timing [s]."""
 
-    approach: tuple = (-0.06, 0.08, -0.10)
-    press_start: tuple = (-0.06, 0.145, -0.10)
-    press_end: tuple = (0.06, 0.145, -0.10)
-    retreat: tuple = (0.06, 0.08, -0.10)
+    approach: tuple = (-0.06, -0.08, -0.10)
+    press_start: tuple = (-0.06, -0.145, -0.10)
+    press_end: tuple = (0.06, -0.145, -0.10)
+    retreat: tuple = (0.06, -0.08, -0.10)
     period: float = 6.0
     start_delay: float = 2.0
 

@@ -9,8 +9,10 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 
+from paper_sim_ros.core.appearance import AppearanceConfig, PaperAppearance
 from paper_sim_ros.core.config import SheetConfig
-from paper_sim_ros.core.sheet import AUX, BEND, HINGE, build_flat_sheet
+from paper_sim_ros.core.sheet import (AUX, BEND, CREASED, HINGE, INSERTED, UNDAMAGED,
+                                      build_flat_sheet, damage_labels)
 from paper_sim_ros.core.topology import vertex_normals
 from paper_sim_ros.msg_adapters.diagnostics import (diagnostic_array, diagnostic_status,
                                                     format_value, values_of)
@@ -21,8 +23,6 @@ from paper_sim_ros.msg_adapters.markers import (PROBE_NS, SPRING_NS, SURFACE_NS,
 from paper_sim_ros.msg_adapters.point_cloud import (POINT_DTYPE, POINT_FIELDS, create_cloud,
                                                     dense_surface_points, read_points,
                                                     sheet_points)
-from paper_sim_ros.msg_adapters.surface import (CREASED, INSERTED, UNDAMAGED, damage_labels,
-                                                lambert_colors)
 
 from ros_harness import parse_cloud
 
@@ -144,8 +144,9 @@ def test_dense_sampling_refuses_bad_options():
         dense_surface_points(sheet.positions, normals, labels, sheet.triangles, 2, np.nan, rng)
 
 
-# ------------------------------------------------------------------------ labels, colours
+# ---------------------------------------------------------------------------------- labels
 def test_damage_labels():
+    """The labels paper/points carries (core.damage_labels)."""
     sheet = build_flat_sheet(SheetConfig(nx=4, ny=4))
     initial = sheet.vertex_count
     labels = damage_labels(initial, sheet.spring_vertices, sheet.spring_kind, initial)
@@ -161,23 +162,13 @@ def test_damage_labels():
     np.testing.assert_array_equal(labels, expected)
 
 
-def test_lambert_colors_are_finite_and_brightest_facing_the_light():
-    normals = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0],
-                        [np.nan, 0.0, 0.0]])
-    colors = lambert_colors(normals)
-    assert colors.dtype == np.uint8 and colors.shape == (4, 3)
-    assert colors[0, 0] == colors[1, 0], 'shading must be two-sided'
-    assert colors[0, 0] > colors[2, 0]
-    assert colors[3, 0] > 0
-
-
 # --------------------------------------------------------------------------------- markers
 def marker_arguments(sheet, style=MarkerStyle(), delete_all=False, probes=None,
                      header=HEADER):
-    normals = vertex_normals(sheet.positions, sheet.triangles)
+    colors = PaperAppearance(AppearanceConfig(), sheet).vertex_colors(sheet)  # as the node
     centers, radii, active = probes or (np.array([[0.0, 0.0, 0.05], [1.0, 1.0, 1.0]]),
                                         np.array([0.02, 0.03]), np.array([True, False]))
-    return (header, sheet.positions, sheet.triangles, lambert_colors(normals),
+    return (header, sheet.positions, sheet.triangles, colors,
             sheet.spring_vertices, sheet.spring_kind, centers, radii, active, style, delete_all)
 
 

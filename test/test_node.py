@@ -20,7 +20,7 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from paper_sim_ros.core.simulator import Simulator
+from paper_sim_ros.core.materials import MATERIAL_PRESETS
 from ros_harness import (RosClient, cloud_positions, new_domain_id, parse_cloud, start_node,
                          stop_cleanly)
 
@@ -381,15 +381,48 @@ def test_reset_during_contact(sim):
 def test_crumple_service_answers(sim):
     reset(sim)
     response = sim.call(Trigger, 'paper/crumple', Trigger.Request())
-    if hasattr(Simulator, 'crumple'):
-        assert response.success, response.message
-        sim.spin_for(1.5)
-        values = diagnostics(sim)
-        assert int(values['aux_springs']) > 0 or int(values['vertices']) > VERTICES
-        labels = parse_cloud(fresh_cloud(sim))['label']
-        assert labels.max() > 0, 'crumpled sheet has no damage labels'
-    else:
-        assert not response.success and 'not available' in response.message
+    assert response.success, response.message
+    sim.spin_for(1.5)
+    values = diagnostics(sim)
+    assert int(values['aux_springs']) > 0 or int(values['vertices']) > VERTICES
+    labels = parse_cloud(fresh_cloud(sim))['label']
+    assert labels.max() > 0, 'crumpled sheet has no damage labels'
     since = time.monotonic()
     sim.spin_for(1.0)
     assert_finite_outputs(sim, since)
+
+
+# ----------------------------------------------------------------------- material, looks
+@pytest.mark.slow
+def test_a_material_sets_the_defaults_and_explicit_values_win(tmp_path):
+    """A node of its own: material cardboard with damage.fragility given on the command
+    line. The preset's values are the sheet's, the explicit one wins, and the material and
+    the appearance are read-only parameters with ranges."""
+    domain = new_domain_id()
+    process = start_node(tmp_path, {'sheet.nx': 9, 'sheet.ny': 9, 'material': 'cardboard',
+                                    'damage.fragility': 3.0, 'appearance.texture_blend': 0.5},
+                         domain_id=domain)
+    client = RosClient(domain)
+    client.process = process
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        client.spin_until(lambda: client.latest('paper/points') is not None, 60,
+                          'the first point cloud', process)
+        cardboard = MATERIAL_PRESETS['cardboard']
+        assert get_parameter(client, 'material') == 'cardboard'
+        for name in ('grammage', 'stretch_stiffness', 'bending_rigidity'):
+            assert get_parameter(client, f'sheet.{name}') == cardboard['sheet'][name], name
+        assert get_parameter(client, 'damage.area_conservation') == \
+            cardboard['damage']['area_conservation']
+        assert get_parameter(client, 'damage.fragility') == 3.0, 'the explicit value lost'
+        assert get_parameter(client, 'appearance.texture_blend') == 0.5
+        material, ambient = client.call(
+            DescribeParameters, '/paper_sim/describe_parameters',
+            DescribeParameters.Request(names=['material', 'appearance.ambient'])).descriptors
+        assert material.read_only and 'cardboard' in material.description
+        assert ambient.read_only and ambient.floating_point_range[0].to_value == 1.0
+        refused = set_parameters(client, material='banknote')[0]
+        assert not refused.successful and get_parameter(client, 'material') == 'cardboard'
+    finally:
+        client.close()
+        stop_cleanly(process)

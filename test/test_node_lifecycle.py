@@ -75,6 +75,17 @@ def test_an_inconsistent_parameter_set_is_a_clear_startup_error(tmp_path):
     assert 'Traceback' not in result.stderr
 
 
+@pytest.mark.parametrize('parameters, reason', [
+    ({'material': 'papyrus'}, "unknown material 'papyrus'"),
+    ({'appearance.texture_path': 'missing.png'}, "texture image 'missing.png' does not exist"),
+], ids=['material', 'texture'])
+def test_an_unknown_material_or_texture_is_a_clear_startup_error(tmp_path, parameters, reason):
+    result = run_to_completion(tmp_path, {**SMALL, **parameters})
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert 'cannot start' in result.stderr and reason in result.stderr, result.stderr[-2000:]
+    assert 'Traceback' not in result.stderr
+
+
 @pytest.mark.slow
 def test_falling_behind_is_graceful_and_reported(tmp_path):
     """A physics rate the machine cannot follow: frames stay dt apart (the stamps say so),

@@ -1,15 +1,20 @@
 """The node's parameter table, its validation and its scheduling, without a node."""
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 import pytest
 import yaml
 
-from paper_sim_ros.core.config import SheetConfig, SimulationConfig
+from paper_sim_ros.core.appearance import AppearanceConfig
+from paper_sim_ros.core.config import DamageConfig, SheetConfig, SimulationConfig
+from paper_sim_ros.core.materials import MATERIAL_PRESETS
+from paper_sim_ros.core.scenarios import pin_mask
 from paper_sim_ros.core.sheet import build_flat_sheet
-from paper_sim_ros.node import Schedule, pin_mask
+from paper_sim_ros.node import Schedule
 from paper_sim_ros.node_parameters import (PARAMETER_NAMES, PARAMETER_SPECS, PARAMETERS,
-                                           settings_from_values)
+                                           declared_defaults, settings_from_values)
 from ros_harness import CONFIG
 
 
@@ -37,7 +42,8 @@ def test_every_parameter_is_described_once_with_a_range_where_numeric():
             low, high = spec.bounds
             assert low <= spec.default <= high, spec.name
     for name in ('sheet.nx', 'sheet.ny', 'solver.method', 'physics_rate', 'frame_id',
-                 'probe_topics', 'rerun_path', 'seed'):
+                 'probe_topics', 'rerun_path', 'seed', 'material', 'damage.fragility',
+                 'appearance.texture_path', 'appearance.light_direction'):
         assert PARAMETER_SPECS[name].read_only, f'{name} cannot change at run time'
     for name in ('publish_rate', 'markers_rate', 'probe_radii', 'probe_timeout', 'pin_mode',
                  'crumple_count', 'solver.substeps', 'contact.ground_height'):
@@ -84,6 +90,10 @@ def test_one_radius_serves_every_probe():
     ({'sheet.nx': 2}, 'nx'),
     ({'contact.ground_friction': -1.0}, 'ground_friction'),
     ({'publish_rate': float('nan')}, 'publish_rate'),
+    ({'material': 'papyrus'}, "unknown material 'papyrus'"),
+    ({'appearance.light_direction': [0.0, 0.0, 0.0]}, 'light_direction'),
+    ({'appearance.normal_level': 0}, 'normal_level'),
+    ({'appearance.texture_blend': 1.5}, 'texture_blend'),
 ])
 def test_invalid_values_are_refused_with_a_reason(changes, reason):
     with pytest.raises(ValueError, match=reason):
@@ -109,10 +119,80 @@ def test_schedule_publishes_at_its_rate_and_counts_what_it_skips():
 
 
 def test_pin_mask_clamps_the_short_edge():
+    """The node pins with the core's pin_mask: short_edge is the edge at y = -height/2."""
     sheet = build_flat_sheet(SheetConfig(nx=5, ny=7))
     assert not pin_mask(sheet, 'none').any()
     mask = pin_mask(sheet, 'short_edge')
     assert mask.sum() == 5
-    assert np.allclose(sheet.positions[mask, 1], sheet.height / 2)
+    np.testing.assert_allclose(sheet.positions[mask, 1], -sheet.height / 2, atol=1e-12,
+                               err_msg='short_edge must clamp the edge at y = -height/2')
     with pytest.raises(ValueError):
         pin_mask(sheet, 'corner')
+
+
+# -------------------------------------------------------------------------------- material
+def test_without_a_material_the_defaults_are_the_core_s():
+    assert declared_defaults('') == {**defaults(), 'material': ''}
+    settings = settings_from_values(declared_defaults(''))
+    assert settings.material == ''
+    assert settings.simulation.sheet == SheetConfig()
+    assert settings.simulation.damage == DamageConfig()
+
+
+@pytest.mark.parametrize('material', sorted(MATERIAL_PRESETS))
+def test_a_material_preset_gives_the_defaults_of_the_parameters_it_names(material):
+    declared = declared_defaults(material)
+    settings = settings_from_values(declared)
+    assert settings.material == material
+    for section, values in MATERIAL_PRESETS[material].items():
+        config = getattr(settings.simulation, section)
+        for field, value in values.items():
+            name = f'{section}.{field}'
+            spec = PARAMETER_SPECS[name]  # every preset value is a node parameter...
+            assert spec.read_only, f'{name} is set by the read-only material'
+            assert type(declared[name]) is type(spec.default), f'{name}: declared type'
+            low, high = spec.bounds  # ... and inside the range rclpy enforces
+            assert low <= declared[name] <= high, f'{material}: {name} = {value}'
+            assert getattr(config, field) == pytest.approx(value), name
+    named = {f'{section}.{field}' for section, values in MATERIAL_PRESETS[material].items()
+             for field in values}
+    others = {name: value for name, value in declared.items()
+              if name not in named and name != 'material'}
+    assert others == {name: value for name, value in defaults().items() if name in others}, \
+        'a preset changed a parameter it does not name'
+
+
+def test_a_parameter_given_explicitly_wins_over_the_material():
+    """rclpy declares a parameter with the value given in the parameter file or with -p when
+    there is one, else with the declared default: the preset's. Same here."""
+    explicit = {'damage.fragility': 3.0, 'sheet.grammage': 0.1}
+    settings = settings_from_values({**declared_defaults('cardboard'), **explicit})
+    assert settings.simulation.damage.fragility == 3.0
+    assert settings.simulation.sheet.grammage == 0.1
+    cardboard = MATERIAL_PRESETS['cardboard']
+    assert settings.simulation.sheet.bending_rigidity == cardboard['sheet']['bending_rigidity']
+    assert settings.simulation.damage.area_conservation == \
+        cardboard['damage']['area_conservation']
+
+
+def test_an_unknown_material_is_refused_with_the_known_ones():
+    with pytest.raises(ValueError, match='known: printer_paper'):
+        declared_defaults('papyrus')
+
+
+# ------------------------------------------------------------------------------ appearance
+def test_every_appearance_field_is_a_parameter():
+    names = {spec.name for spec in PARAMETERS if spec.name.startswith('appearance.')}
+    assert names == {f'appearance.{field.name}' for field in fields(AppearanceConfig)}
+    assert settings_from_values(defaults()).appearance == AppearanceConfig()
+
+
+def test_appearance_parameters_reach_the_appearance_config():
+    settings = settings_from_values({
+        **defaults(), 'appearance.normal_level': 4, 'appearance.light_direction': [0.0, 0.0, 2.0],
+        'appearance.ambient': 0.5, 'appearance.texture_blend': 0.0,
+        'appearance.texture_seed': 7, 'appearance.texture_size': 64,
+        'appearance.texture_path': '/tmp/page.png'})
+    assert settings.appearance == AppearanceConfig(
+        texture_path='/tmp/page.png', normal_level=4, light_direction=(0.0, 0.0, 2.0),
+        ambient=0.5, texture_blend=0.0, texture_seed=7, texture_size=64)
