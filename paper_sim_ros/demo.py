@@ -111,12 +111,14 @@ def _summary(simulation: PaperSimNode, wall_seconds: float) -> str:
     simulator = simulation.simulator
     sheet = simulator.sheet
     counters = simulation.counters()
+    last_second_strain, run_strain = simulation.strain_summary()
     return (f'{simulator.frame} frames ({simulator.time:.1f} s simulated in '
             f'{wall_seconds:.1f} s: real-time factor {simulator.time / wall_seconds:.2f}; '
             f'{counters["slipped_frames"]} frames behind the clock, '
             f'{counters["dropped_frames"]} publications dropped), '
             f'{sheet.vertex_count} vertices, breaks {simulator.breaks}, '
-            f'folds {simulator.folds}, max strain {simulator.max_strain():.2%}, '
+            f'folds {simulator.folds}, max strain {last_second_strain:.2%} over the last '
+            f'second, {run_strain:.2%} over the run, '
             f'all finite: {bool(np.isfinite(sheet.positions).all())}')
 
 

@@ -21,7 +21,8 @@ throttled warning naming the reason, and counted.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from collections import deque
 import math
 import sys
 import time
@@ -125,6 +126,10 @@ class Statistics:
     window_refused: int = 0
     last_real_time_factor: float = 0.0
     last_step_seconds: float = 0.0
+    max_strain: float = 0.0
+    """Largest HINGE strain |l/l0 - 1| of any frame since start."""
+    recent_strains: deque = field(default_factory=deque)
+    """HINGE max strain of each of the last second's frames (the node bounds its length)."""
 
 
 def _descriptor(spec) -> ParameterDescriptor:
@@ -381,6 +386,11 @@ class PaperSimNode(Node):
             stats.window_step_seconds += seconds
             stats.window_step_max = max(stats.window_step_max, seconds)
             stats.last_step_seconds = seconds
+            strain = simulator.max_strain()
+            stats.max_strain = max(stats.max_strain, strain)
+            stats.recent_strains.append(strain)
+            while len(stats.recent_strains) > self._settings.physics_rate:
+                stats.recent_strains.popleft()
             if self._recorder is not None and frame < due - 1:
                 self._recorder.log_inputs(self._recording_time(), simulator)
         self._publish()
@@ -513,6 +523,11 @@ class PaperSimNode(Node):
             'resets': stats.resets,
             'tick_errors': stats.tick_errors,
         }
+
+    def strain_summary(self) -> tuple[float, float]:
+        """Largest HINGE strain over the last second of frames, and since start."""
+        stats = self._stats
+        return max(stats.recent_strains, default=0.0), stats.max_strain
 
     def _on_diagnostics(self) -> None:
         stats = self._stats

@@ -31,6 +31,7 @@ def warm_up() -> float:
         simulator.step_frame()
         simulator.max_strain()
         simulator.energy()
+        simulator.max_table_penetration()
         simulator.crumple(2, 0)
         simulator.step_frame()
     # the appearance kernels (the node shades every published frame)

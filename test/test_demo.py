@@ -1,6 +1,7 @@
 """The scripted probe's path, and `make demo` end to end (short and small)."""
 from __future__ import annotations
 
+import re
 import subprocess
 
 import numpy as np
@@ -47,4 +48,9 @@ def test_demo_runs_and_says_where_its_recording_is(tmp_path):
     assert f'Rerun recording: {recording}' in result.stdout
     assert recording.stat().st_size > 0
     assert 'all finite: True' in result.stdout
+    strains = re.search(r'max strain ([0-9.]+)% over the last second, ([0-9.]+)% over the run',
+                        result.stdout)
+    assert strains, result.stdout[-2000:]
+    last_second, run = (float(value) for value in strains.groups())
+    assert 0.0 < last_second <= run, f'last second {last_second} %, run {run} %'
     assert 'Traceback' not in result.stderr

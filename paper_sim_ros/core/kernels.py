@@ -401,6 +401,38 @@ def excess_compression(positions, spring_vertices, rest_length, threshold):
 
 
 @njit(cache=True)
+def table_dimple(x, y, ground_height, probe_center, probe_radius, probe_active):
+    """How far below the table the lowest active probe's surface reaches at (x, y) [m]
+    (0 where no probe reaches below the table there): the dimple a probe presses into the
+    yielding table."""
+    deepest = 0.0
+    for p in range(probe_radius.shape[0]):
+        if not probe_active[p]:
+            continue
+        dx = x - probe_center[p, 0]
+        dy = y - probe_center[p, 1]
+        across = probe_radius[p] ** 2 - dx * dx - dy * dy
+        if across <= 0.0:
+            continue
+        deepest = max(deepest, ground_height - (probe_center[p, 2] - np.sqrt(across)))
+    return deepest
+
+
+@njit(cache=True)
+def table_penetration(positions, ground_height, probe_center, probe_radius, probe_active):
+    """Deepest any vertex sits below the table beyond the probes' dimples in it [m]."""
+    deepest = 0.0
+    for v in range(positions.shape[0]):
+        depth = ground_height - positions[v, 2]
+        if depth <= deepest:
+            continue
+        depth -= table_dimple(positions[v, 0], positions[v, 1], ground_height, probe_center,
+                              probe_radius, probe_active)
+        deepest = max(deepest, depth)
+    return deepest
+
+
+@njit(cache=True)
 def all_finite(values):
     for x in values.ravel():
         if not np.isfinite(x):

@@ -82,6 +82,7 @@ def run_scenario(scenario: Scenario,
     dt = scenario.config.solver.dt
     max_strain = 0.0
     max_penetration = 0.0
+    max_table_penetration = 0.0
     nan_seen = False
     stepping_seconds = 0.0
     for frame in range(scenario.frame_count):
@@ -93,6 +94,8 @@ def run_scenario(scenario: Scenario,
         sheet = simulator.sheet
         max_strain = max(max_strain, simulator.max_strain())
         max_penetration = max(max_penetration, simulator.max_probe_penetration())
+        max_table_penetration = max(max_table_penetration,
+                                    simulator.max_table_penetration())
         nan_seen = nan_seen or simulator.nan_seen or not kernels.all_finite(sheet.positions)
         if on_frame is not None:
             on_frame(simulator, step_seconds)
@@ -110,6 +113,7 @@ def run_scenario(scenario: Scenario,
         'realtime_factor': sim_seconds / stepping_seconds if stepping_seconds > 0 else 0.0,
         'max_strain': max_strain,
         'max_probe_penetration_m': max_penetration,
+        'max_table_penetration_m': max_table_penetration,
         'nan': bool(nan_seen),
         'total_mass': sheet.total_mass,
         'final_positions_sha256': sheet.positions_sha256(),

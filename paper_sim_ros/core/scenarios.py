@@ -94,6 +94,53 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
         'sheet': {'elevation': 0.005},
         'contact': {'ground_enabled': True},
     },
+    # a fingertip rests on the table 15 mm beside the sheet's short edge, pressed 1 mm into
+    # the (yielding) table, slides into the sheet and pushes it 10 cm along the table
+    'slide': {
+        'description': 'A4 sheet flat on a table; a 1 cm fingertip rests on the table beside '
+                       'its short edge, pressed 1 mm in, slides into the sheet and pushes it '
+                       '10 cm, then lifts off.',
+        'duration': 3.5,
+        'contact': {'ground_enabled': True},
+        'probes': [{
+            'name': 'finger',
+            'radius': 0.01,
+            'keyframes': [[0.0, 0.0, -0.1635, 0.05], [0.5, 0.0, -0.1635, 0.009],
+                          [2.5, 0.0, -0.0485, 0.009], [3.0, 0.0, -0.0485, 0.05]],
+        }],
+    },
+    # a fingertip presses the sheet's middle 1 mm into the (yielding) table and drags it
+    # 10 cm across the table (it grips better than the table: 0.6 against 0.4)
+    'drag': {
+        'description': 'A4 sheet flat on a table; a 1 cm fingertip presses its middle 1 mm '
+                       'into the table, drags it 10 cm across the table, and lifts off.',
+        'duration': 3.0,
+        'contact': {'ground_enabled': True},
+        'probes': [{
+            'name': 'finger',
+            'radius': 0.01,
+            'keyframes': [[0.0, 0.0, 0.0, 0.05], [0.5, 0.0, 0.0, 0.009],
+                          [2.0, 0.1, 0.0, 0.009], [2.5, 0.1, 0.0, 0.05]],
+        }],
+    },
+    # the sheet of 'hanging', damped so that it hangs still by 2.5 s (in the plane
+    # y = -0.1485, its free edge ~0.3 m below the pins); then a 1.5 cm probe pushes 1.5 cm
+    # past that plane from +y, halfway down, sweeps across it and withdraws
+    'poke': {
+        'description': 'A4 sheet pinned along one short edge hangs down; a 1.5 cm probe '
+                       'pushes into it halfway down, sweeps across it and withdraws.',
+        'duration': 5.0,
+        'pin': 'short_edge',
+        'sheet': {'elevation': 0.5},
+        'solver': {'air_damping': 2.0},
+        'contact': {'ground_enabled': False},
+        'probes': [{
+            'name': 'probe',
+            'radius': 0.015,
+            'keyframes': [[2.5, -0.09, -0.1035, 0.35], [3.0, -0.09, -0.1785, 0.35],
+                          [4.0, 0.09, -0.1785, 0.35], [4.5, 0.09, -0.1035, 0.35]],
+        }],
+    },
     'crumple': {
         'description': 'Random damage (breaks and folds, paper Fig. 8) on a flat sheet, '
                        'then free relaxation without gravity.',

@@ -516,6 +516,17 @@ class Simulator:
             deepest = max(deepest, float(np.max(self.probes.radius[p] - distance)))
         return deepest
 
+    def max_table_penetration(self) -> float:
+        """Deepest any vertex sits below the table now [m] (0 without a table). Under an
+        active probe pressed into the table, which yields there like a desk mat, a vertex
+        may sit as deep as the probe's surface (the dimple): only what lies deeper counts."""
+        contact = self.config.contact
+        if not contact.ground_enabled:
+            return 0.0
+        probes = self.probes
+        return float(kernels.table_penetration(self.sheet.positions, contact.ground_height,
+                                               probes.end, probes.radius, probes.active))
+
 
 def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.ndarray:
     """Breadth-first hop count of every vertex from the nearest pinned vertex along the
