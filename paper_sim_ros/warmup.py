@@ -12,6 +12,7 @@ import numpy as np
 from .core import (AppearanceConfig, ContactConfig, SheetConfig, SimulationConfig, Simulator,
                    SolverConfig)
 from .core.appearance import PaperAppearance
+from .core.camera import CameraConfig, render
 from .core.config import SOLVERS
 
 
@@ -35,8 +36,12 @@ def warm_up() -> float:
         simulator.crumple(2, 0)
         simulator.step_frame()
     # the appearance kernels (the node shades every published frame)
-    PaperAppearance(AppearanceConfig(texture_size=16), simulator.sheet).vertex_colors(
-        simulator.sheet)
+    sheet = simulator.sheet
+    colors = PaperAppearance(AppearanceConfig(texture_size=16), sheet).vertex_colors(sheet)
+    # the camera's rasteriser and ray caster
+    render(CameraConfig(width=8, height=6), sheet.positions, sheet.triangles, sheet.material,
+           simulator.damage_labels(), colors, np.zeros((1, 3)), np.ones(1),
+           np.ones(1, dtype=bool), 0.0)
     return time.perf_counter() - started
 
 
