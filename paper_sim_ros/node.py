@@ -129,7 +129,7 @@ class Statistics:
     max_strain: float = 0.0
     """Largest HINGE strain |l/l0 - 1| of any frame since start."""
     recent_strains: deque = field(default_factory=deque)
-    """HINGE max strain of each of the last second's frames (the node bounds its length)."""
+    """HINGE max strain of each of the last second's frames (a deque of one second's length)."""
 
 
 def _descriptor(spec) -> ParameterDescriptor:
@@ -179,7 +179,9 @@ class PaperSimNode(Node):
         self._warm_up()
 
         self._recorder = self._open_recorder(settings)
-        self._stats = Statistics(window_started=time.monotonic())
+        self._stats = Statistics(
+            window_started=time.monotonic(),
+            recent_strains=deque(maxlen=int(round(self._settings.physics_rate))))
         self._points_schedule = Schedule()
         self._markers_schedule = Schedule()
         self._origin_ns: int | None = None
@@ -389,8 +391,6 @@ class PaperSimNode(Node):
             strain = simulator.max_strain()
             stats.max_strain = max(stats.max_strain, strain)
             stats.recent_strains.append(strain)
-            while len(stats.recent_strains) > self._settings.physics_rate:
-                stats.recent_strains.popleft()
             if self._recorder is not None and frame < due - 1:
                 self._recorder.log_inputs(self._recording_time(), simulator)
         self._publish()
