@@ -4,6 +4,7 @@ from __future__ import annotations
 from typing import Callable
 
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -23,6 +24,12 @@ def run_node(factory: Callable[[], Node], args=None, name: str = 'paper_sim',
     except startup_errors as error:
         rclpy.logging.get_logger(name).fatal(f'cannot start: {error}')
         return 1
+    except RCLError:
+        # SIGINT/SIGTERM shut the context down from rclpy's signal handler; if that lands
+        # while the executor builds its wait set, rcl reports the invalid context instead of
+        # ExternalShutdownException (a race inside rclpy.spin). Still an orderly stop.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
