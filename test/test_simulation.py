@@ -351,6 +351,24 @@ def test_every_builtin_scenario_keeps_the_sheet_whole_and_finite(name):
     assert 0.0 <= metrics['max_table_penetration_m'] < 0.1, metrics['max_table_penetration_m']
 
 
+def test_final_motion_metrics_say_how_still_the_sheet_is_at_the_end():
+    """A swinging sheet at 0.3 s is moving, the same sheet at rest on a table is not; the
+    figures are those of the final velocities (speeds in m/s, energy ½ Σ m v² in J)."""
+    swinging = run_scenario(load_scenario('hanging', grid=17, duration=0.3))
+    assert 0.1 < swinging['final_p99_speed_mps'] <= swinging['final_max_speed_mps'] < 20.0
+    assert swinging['final_kinetic_energy_j'] > 1e-5, swinging['final_kinetic_energy_j']
+    built = load_scenario('aged', grid=17, duration=2.0, damage_enabled=False)
+    simulator = build_simulator(built)
+    resting = run_scenario(built, simulator=simulator)
+    speed = np.linalg.norm(simulator.sheet.velocities, axis=1)
+    assert resting['final_max_speed_mps'] == pytest.approx(speed.max(), rel=1e-12)
+    assert resting['final_p99_speed_mps'] < 0.01, resting
+    np.testing.assert_allclose(
+        resting['final_kinetic_energy_j'],
+        0.5 * np.sum(simulator.sheet.vertex_mass * speed ** 2), rtol=1e-12)
+    assert resting['final_kinetic_energy_j'] < 1e-3 * swinging['final_kinetic_energy_j']
+
+
 def test_table_penetration_counts_depth_below_the_table_beyond_a_pressed_probe():
     """max_table_penetration: a vertex 1 mm under the table counts 1 mm; under a probe pressed
     2 mm into the (yielding) table it may sit on the probe's surface, and only what lies

@@ -15,6 +15,7 @@ import os
 import time
 from typing import Any, Callable
 
+import numpy as np
 import yaml
 
 from . import kernels
@@ -115,9 +116,22 @@ def run_scenario(scenario: Scenario,
         'max_probe_penetration_m': max_penetration,
         'max_table_penetration_m': max_table_penetration,
         'nan': bool(nan_seen),
+        **final_motion(sheet.velocities, sheet.vertex_mass),
         'total_mass': sheet.total_mass,
         'final_positions_sha256': sheet.positions_sha256(),
         **damage_metrics(simulator),
+    }
+
+
+def final_motion(velocities: np.ndarray, vertex_mass: np.ndarray) -> dict:
+    """How still the sheet is at the end of a run: its fastest and 99th-percentile vertex
+    speed [m/s] and its kinetic energy [J] (a "static" sheet handed to a perception test
+    should not be drifting)."""
+    speed = np.linalg.norm(velocities, axis=1)
+    return {
+        'final_max_speed_mps': float(speed.max(initial=0.0)),
+        'final_p99_speed_mps': float(np.percentile(speed, 99)) if speed.size else 0.0,
+        'final_kinetic_energy_j': float(0.5 * np.sum(vertex_mass * speed * speed)),
     }
 
 
