@@ -18,6 +18,7 @@ Cloud layout (little endian, ``point_step`` = 28, one row, ``is_dense`` = True):
 """
 from __future__ import annotations
 
+import array
 import sys
 
 import numpy as np
@@ -64,6 +65,17 @@ POINT_FIELDS = tuple(point_fields(POINT_DTYPE))
 """The fields of ``paper/points``, in offset order."""
 
 
+def with_data(message, values: np.ndarray):
+    """``message`` with its uint8 sequence ``data`` set to the bytes of ``values``, as the
+    ``array('B')`` it holds. Passed to a generated message's constructor, bytes or an array
+    are converted element by element (8 ms for a 640 × 480 cloud); set afterwards, an
+    ``array('B')`` is taken as it is."""
+    data = array.array('B')
+    data.frombytes(np.ascontiguousarray(values).reshape(-1).view(np.uint8).data)
+    message.data = data
+    return message
+
+
 def create_cloud(header: Header, points: np.ndarray) -> PointCloud2:
     """An unorganised (height 1) cloud of a 1-D structured array; the data are its bytes."""
     points = np.asarray(points)
@@ -72,11 +84,10 @@ def create_cloud(header: Header, points: np.ndarray) -> PointCloud2:
     fields = point_fields(points.dtype)
     finite = all(np.isfinite(points[name]).all() for name in points.dtype.names
                  if points.dtype.fields[name][0].kind == 'f')
-    return PointCloud2(
+    return with_data(PointCloud2(
         header=header, height=1, width=int(points.shape[0]), fields=fields,
         is_bigendian=False, point_step=points.dtype.itemsize,
-        row_step=points.dtype.itemsize * int(points.shape[0]),
-        data=np.ascontiguousarray(points).tobytes(), is_dense=bool(finite))
+        row_step=points.dtype.itemsize * int(points.shape[0]), is_dense=bool(finite)), points)
 
 
 def sheet_points(positions: np.ndarray, normals: np.ndarray, labels: np.ndarray) -> np.ndarray:

@@ -1,0 +1,87 @@
+"""A virtual camera's frame (``paper_sim_ros.core.camera``) as ROS 2 messages: depth and
+colour ``sensor_msgs/Image``, ``sensor_msgs/CameraInfo`` and an organised
+``sensor_msgs/PointCloud2`` with ground truth per pixel (issue 16).
+
+All built from numpy arrays as bytes; no per-pixel Python loop. Every message of one frame
+takes the same header: the camera's optical frame (REP 103: z forward, x right, y down) and
+one stamp. Depth is metres along the optical axis, NaN where nothing is hit (REP 118).
+
+Organised cloud layout (little endian, ``point_step`` = 24, height × width, row-major,
+``is_dense`` = False: pixels that hit nothing are NaN in x, y, z, u, v):
+
+    offset  name    type
+     0      x       float32   [m], optical frame
+     4      y       float32
+     8      z       float32   (= depth)
+    12      u       float32   [m] material x of the paper point seen (NaN: not paper)
+    16      v       float32   [m] material y
+    20      label   uint16    damage label of the paper seen (0: not paper)
+    22      hit     uint8     what the pixel shows (core.camera HIT_*)
+    23      (1 byte padding, zero)
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_msgs.msg import Header
+
+from paper_sim_ros.core.camera import (CameraConfig, CameraFrame, back_project, intrinsics,
+                                       projection_matrix)
+from .point_cloud import point_fields, with_data
+
+PIXEL_DTYPE = np.dtype({
+    'names': ['x', 'y', 'z', 'u', 'v', 'label', 'hit'],
+    'formats': ['<f4', '<f4', '<f4', '<f4', '<f4', '<u2', 'u1'],
+    'offsets': [0, 4, 8, 12, 16, 20, 22],
+    'itemsize': 24,
+})
+"""One pixel of ``paper/<camera>/points``."""
+
+_BIG_ENDIAN = sys.byteorder == 'big'
+
+
+def _image(header: Header, pixels: np.ndarray, encoding: str) -> Image:
+    height, width = pixels.shape[:2]
+    data = np.ascontiguousarray(pixels)
+    return with_data(Image(header=header, height=height, width=width, encoding=encoding,
+                           is_bigendian=int(_BIG_ENDIAN and data.dtype.itemsize > 1),
+                           step=data.strides[0]), data)
+
+
+def depth_image(header: Header, frame: CameraFrame) -> Image:
+    """``32FC1``: metres along the optical axis, NaN where nothing is hit."""
+    return _image(header, frame.depth.astype(np.float32, copy=False), '32FC1')
+
+
+def color_image(header: Header, frame: CameraFrame) -> Image:
+    """``rgb8``, as the appearance model shades the sheet."""
+    return _image(header, frame.rgb.astype(np.uint8, copy=False), 'rgb8')
+
+
+def camera_info(header: Header, config: CameraConfig) -> CameraInfo:
+    """Plumb-bob model with zero distortion; K, R (identity: monocular) and P = [K | 0]
+    consistent with ``core.camera.project``."""
+    return CameraInfo(header=header, height=config.height, width=config.width,
+                      distortion_model='plumb_bob', d=[0.0] * 5,
+                      k=intrinsics(config).ravel().tolist(),
+                      r=np.eye(3).ravel().tolist(),
+                      p=projection_matrix(config).ravel().tolist())
+
+
+def organized_cloud(header: Header, config: CameraConfig, frame: CameraFrame) -> PointCloud2:
+    """height × width points back-projected from the depth image with the ground truth of
+    each pixel (PIXEL_DTYPE); NaN where the pixel hits nothing."""
+    points = np.zeros((config.height, config.width), dtype=PIXEL_DTYPE)
+    optical = back_project(config, frame.depth)
+    points['x'], points['y'], points['z'] = np.moveaxis(optical, -1, 0)
+    points['u'] = frame.u
+    points['v'] = frame.v
+    points['label'] = frame.label
+    points['hit'] = frame.hit
+    return with_data(PointCloud2(
+        header=header, height=config.height, width=config.width,
+        fields=point_fields(PIXEL_DTYPE), is_bigendian=False,
+        point_step=PIXEL_DTYPE.itemsize, row_step=PIXEL_DTYPE.itemsize * config.width,
+        is_dense=bool(np.isfinite(frame.depth).all())), points)
