@@ -37,16 +37,18 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
                                 SetParametersResult)
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
 from .core.appearance import PaperAppearance
+from .core.camera import render
 from .core.scenarios import pin_mask
 from .core.sheet import AUX, BEND, HINGE, Sheet
 from .core.simulator import Simulator
 from .core.topology import vertex_normals
+from .msg_adapters.camera import camera_info, color_image, depth_image, organized_cloud
 from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
@@ -184,6 +186,7 @@ class PaperSimNode(Node):
             recent_strains=deque(maxlen=int(round(self._settings.physics_rate))))
         self._points_schedule = Schedule()
         self._markers_schedule = Schedule()
+        self._camera_schedule = Schedule()
         self._origin_ns: int | None = None
         self._delete_all_pending = True
         self._crumple_calls = 0
@@ -191,6 +194,12 @@ class PaperSimNode(Node):
         self._points_pub = self.create_publisher(PointCloud2, 'paper/points', OUTPUT_QOS)
         self._markers_pub = self.create_publisher(MarkerArray, 'paper/markers', OUTPUT_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        camera = f'paper/{settings.camera.name}'
+        self._camera_pubs = (
+            self.create_publisher(Image, f'{camera}/depth/image_raw', OUTPUT_QOS),
+            self.create_publisher(Image, f'{camera}/color/image_raw', OUTPUT_QOS),
+            self.create_publisher(CameraInfo, f'{camera}/camera_info', OUTPUT_QOS),
+            self.create_publisher(PointCloud2, f'{camera}/points', OUTPUT_QOS))
         self._probes = [ProbeInput(topic) for topic in settings.probe_topics]
         self._pose_subscriptions = [
             self.create_subscription(PoseStamped, topic,
@@ -283,6 +292,9 @@ class PaperSimNode(Node):
         if self._settings.markers_rate != previous.markers_rate:
             self._markers_schedule.next_time = min(self._markers_schedule.next_time,
                                                    self.simulator.time)
+        if self._settings.camera_rate != previous.camera_rate:
+            self._camera_schedule.next_time = min(self._camera_schedule.next_time,
+                                                  self.simulator.time)
         if self._settings.diagnostics_rate != previous.diagnostics_rate:
             self._start_diagnostics_timer()
         self.get_logger().info(f'parameters changed: {", ".join(sorted(changed))}')
@@ -421,8 +433,9 @@ class PaperSimNode(Node):
         sim_time = simulator.time
         want_points = self._points_schedule.take(sim_time, settings.publish_rate)
         want_markers = self._markers_schedule.take(sim_time, settings.markers_rate)
+        want_camera = self._camera_schedule.take(sim_time, settings.camera_rate)
         recorder = self._recorder
-        if not (want_points or want_markers):
+        if not (want_points or want_markers or want_camera):
             if recorder is not None:
                 recorder.log_inputs(self._recording_time(), simulator)
             return
@@ -440,8 +453,10 @@ class PaperSimNode(Node):
         if want_points:
             self._points_pub.publish(create_cloud(header, self._cloud_points(
                 sheet, normals, labels)))
-        if want_markers or recorder is not None:
+        if want_markers or want_camera or recorder is not None:
             colors = self._appearance.vertex_colors(sheet)
+        if want_camera:
+            self._publish_camera(header, sheet, labels, colors)
         if want_markers:
             centers, radii, active = (simulator.probes.end, simulator.probes.radius,
                                       simulator.probes.active)
@@ -461,6 +476,25 @@ class PaperSimNode(Node):
                                         'real_time_factor': stats.last_real_time_factor})
         self._stats.window_publish_seconds += time.perf_counter() - started
         self._stats.window_publishes += 1
+
+    def _publish_camera(self, header: Header, sheet: Sheet, labels: np.ndarray,
+                        colors: np.ndarray) -> None:
+        """What the virtual camera sees, its four messages under one header in its optical
+        frame."""
+        settings = self._settings
+        simulator = self.simulator
+        contact = simulator.config.contact
+        camera = settings.camera
+        frame = render(camera, sheet.positions, sheet.triangles, sheet.material, labels,
+                       colors, simulator.probes.end, simulator.probes.radius,
+                       simulator.probes.active,
+                       contact.ground_height if contact.ground_enabled else None)
+        header = Header(frame_id=f'{camera.name}_optical_frame', stamp=header.stamp)
+        depth_pub, color_pub, info_pub, points_pub = self._camera_pubs
+        depth_pub.publish(depth_image(header, frame))
+        color_pub.publish(color_image(header, frame))
+        info_pub.publish(camera_info(header, camera))
+        points_pub.publish(organized_cloud(header, camera, frame))
 
     def _cloud_points(self, sheet: Sheet, normals: np.ndarray, labels: np.ndarray):
         settings = self._settings

@@ -19,6 +19,7 @@ import math
 from typing import Any, Mapping
 
 from .core.appearance import FULL_DETAIL_LEVEL, AppearanceConfig
+from .core.camera import CameraConfig, look_at
 from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
                           SolverConfig, from_mapping)
 from .core.materials import MATERIAL_PRESETS, material_preset
@@ -64,6 +65,8 @@ class NodeSettings:
     bend_springs: bool
     rerun_path: str
     rerun_connect: str
+    camera: CameraConfig
+    camera_rate: float
 
 
 _SHEET = SheetConfig()
@@ -71,6 +74,7 @@ _SOLVER = SolverConfig()
 _CONTACT = ContactConfig()
 _DAMAGE = DamageConfig()
 _APPEARANCE = AppearanceConfig()
+_CAMERA = CameraConfig()
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'world', 'Frame of the sheet: of every published header, and the '
@@ -175,6 +179,24 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   read_only=True),
     ParameterSpec('rerun_connect', '', "Stream to a Rerun viewer at this URL "
                   "(rerun+http://127.0.0.1:9876/proxy); '': off.", read_only=True),
+    ParameterSpec('camera.rate', 0.0, 'Rate of the virtual camera in simulated time [Hz]; '
+                  '0: off. It publishes paper/<camera.name>/depth/image_raw (32FC1 [m], NaN '
+                  'where nothing is hit), color/image_raw (rgb8), camera_info and points (an '
+                  'organised cloud with material u, v and damage label per pixel), in frame '
+                  '<camera.name>_optical_frame.', (0.0, 1000.0)),
+    ParameterSpec('camera.name', _CAMERA.name, 'Name of the camera: its topics and frame.',
+                  read_only=True),
+    ParameterSpec('camera.width', _CAMERA.width, 'Image width [pixels].', (1, 4096),
+                  read_only=True),
+    ParameterSpec('camera.height', _CAMERA.height, 'Image height [pixels].', (1, 4096),
+                  read_only=True),
+    ParameterSpec('camera.horizontal_fov', _CAMERA.horizontal_fov, 'Horizontal field of '
+                  'view [rad].', (0.01, 3.1), read_only=True),
+    ParameterSpec('camera.position', [0.3, -0.35, 0.5], 'Optical centre in frame_id: x y z '
+                  '[m] (default: above the table, oblique).', read_only=True),
+    ParameterSpec('camera.target', [0.0, 0.0, 0.0], 'Point the optical axis goes through, in '
+                  'frame_id: x y z [m]; image up is towards +z (+y looking straight down).',
+                  read_only=True),
     ParameterSpec('damage.enabled', _DAMAGE.enabled, 'Breaks and folds happen (SPEC section '
                   '4).', read_only=True),
     ParameterSpec('damage.fragility', _DAMAGE.fragility, 'phi of Eq. 7: large is rubbery, '
@@ -233,6 +255,28 @@ def _rate(values: Mapping[str, Any], name: str) -> float:
     if not (math.isfinite(rate) and rate >= 0):
         raise ValueError(f'{name} must be finite and >= 0, got {rate}')
     return rate
+
+
+def camera_from_values(values: Mapping[str, Any]) -> CameraConfig:
+    """The camera.* parameters as a ``CameraConfig``; ValueError names what is wrong."""
+    name = str(values['camera.name'])
+    if not (name and name[0].isalpha() and name.replace('_', '').isalnum()):
+        raise ValueError(f'camera.name must be a letter then letters, digits or _, got {name!r}')
+    eye, target = (tuple(float(x) for x in values[f'camera.{key}'])
+                   for key in ('position', 'target'))
+    if len(eye) != 3 or len(target) != 3 or not all(map(math.isfinite, eye + target)):
+        raise ValueError(f'camera.position and camera.target must be 3 finite numbers, got '
+                         f'{list(eye)} and {list(target)}')
+    if math.dist(eye, target) < 1e-6:
+        raise ValueError('camera.target must differ from camera.position')
+    # image up is +z, or +y for a camera looking straight down (or up)
+    vertical = math.hypot(target[0] - eye[0], target[1] - eye[1]) \
+        < 1e-9 * math.dist(eye, target)
+    up = (0.0, 1.0, 0.0) if vertical else (0.0, 0.0, 1.0)
+    return CameraConfig(name=name, width=int(values['camera.width']),
+                        height=int(values['camera.height']),
+                        horizontal_fov=float(values['camera.horizontal_fov']), position=eye,
+                        orientation=look_at(eye, target, up))
 
 
 def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
@@ -297,4 +341,6 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         bend_springs=bool(values['markers.bend_springs']),
         rerun_path=str(values['rerun_path']),
         rerun_connect=str(values['rerun_connect']),
+        camera=camera_from_values(values),
+        camera_rate=_rate(values, 'camera.rate'),
     )

@@ -1,0 +1,109 @@
+"""The node's virtual camera over real DDS (issue 16): depth, colour, camera info and the
+organised cloud arrive at the camera's rate, one header per frame, and show the sheet where
+it is; bad camera parameters are refused with a reason."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from paper_sim_ros.core.camera import HIT_PAPER
+from paper_sim_ros.msg_adapters.camera import PIXEL_DTYPE
+from paper_sim_ros.node_parameters import declared_defaults, settings_from_values
+from ros_harness import RosClient, new_domain_id, start_node, stop_cleanly
+
+WIDTH, HEIGHT, FOV, RATE = 160, 120, 1.0, 10.0
+HEIGHT_ABOVE = 0.5
+TOPICS = {'depth': ('paper/top/depth/image_raw', Image),
+          'color': ('paper/top/color/image_raw', Image),
+          'info': ('paper/top/camera_info', CameraInfo),
+          'points': ('paper/top/points', PointCloud2)}
+
+
+@pytest.fixture(scope='module')
+def camera_node(tmp_path_factory):
+    domain = new_domain_id()
+    process = start_node(tmp_path_factory.mktemp('camera'), {
+        'sheet.nx': 17, 'sheet.ny': 17, 'publish_rate': 5.0, 'markers_rate': 0.0,
+        'camera.rate': RATE, 'camera.name': 'top', 'camera.width': WIDTH,
+        'camera.height': HEIGHT, 'camera.horizontal_fov': FOV,
+        'camera.position': [0.0, 0.0, HEIGHT_ABOVE], 'camera.target': [0.0, 0.0, 0.0]},
+        domain_id=domain)
+    client = RosClient(domain)
+    for topic, kind in TOPICS.values():
+        client.subscribe(kind, topic)
+    try:
+        client.spin_until(lambda: all(len(client.messages(topic)) >= 6
+                                      for topic, _ in TOPICS.values()), 90,
+                          'six frames of every camera topic', process)
+        yield client
+    finally:
+        client.close()
+        stop_cleanly(process)
+
+
+def test_every_frame_has_its_four_messages_under_one_header_at_the_rate(camera_node):
+    stamps = {}
+    for key, (topic, _) in TOPICS.items():
+        messages = camera_node.messages(topic)
+        assert {m.header.frame_id for m in messages} == {'top_optical_frame'}, key
+        stamps[key] = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in messages]
+    common = set(stamps['depth']) & set(stamps['color']) & set(stamps['info']) \
+        & set(stamps['points'])
+    assert len(common) >= 5, stamps
+    ordered = sorted(common)
+    # simulated time between frames: 1 / rate (a dropped slot would be a multiple); the
+    # first frame is the first physics frame, the next on the slot grid t = k / rate
+    gaps = np.diff(ordered)[1:]
+    assert np.allclose(gaps / (1.0 / RATE), np.rint(gaps / (1.0 / RATE)), atol=0.02), gaps
+    assert np.min(gaps) == pytest.approx(1.0 / RATE, abs=1e-3)
+
+
+def test_images_and_info_describe_the_camera_above_the_sheet(camera_node):
+    depth = camera_node.latest(TOPICS['depth'][0])
+    color = camera_node.latest(TOPICS['color'][0])
+    info = camera_node.latest(TOPICS['info'][0])
+    assert (depth.encoding, depth.width, depth.height, depth.step) == ('32FC1', WIDTH, HEIGHT,
+                                                                       4 * WIDTH)
+    assert (color.encoding, color.width, color.height, color.step) == ('rgb8', WIDTH, HEIGHT,
+                                                                       3 * WIDTH)
+    focal = 0.5 * WIDTH / math.tan(0.5 * FOV)
+    np.testing.assert_allclose(info.k, [focal, 0, (WIDTH - 1) / 2, 0, focal,
+                                        (HEIGHT - 1) / 2, 0, 0, 1])
+    assert (info.width, info.height, info.distortion_model) == (WIDTH, HEIGHT, 'plumb_bob')
+    pixels = np.frombuffer(bytes(depth.data), '<f4').reshape(HEIGHT, WIDTH)
+    # the A4 sheet (0.21 x 0.297 m) fills the middle of the view, flat at z = 0: 0.5 m away
+    middle = pixels[HEIGHT // 2 - 10:HEIGHT // 2 + 10, WIDTH // 2 - 10:WIDTH // 2 + 10]
+    np.testing.assert_allclose(middle, HEIGHT_ABOVE, atol=2e-3)
+    rgb = np.frombuffer(bytes(color.data), np.uint8).reshape(HEIGHT, WIDTH, 3)
+    assert rgb[HEIGHT // 2, WIDTH // 2].min() > 100, 'the sheet looks like paper, not black'
+
+
+def test_organised_cloud_shows_the_sheet_with_its_material_coordinates(camera_node):
+    cloud = camera_node.latest(TOPICS['points'][0])
+    assert (cloud.height, cloud.width, cloud.point_step) == (HEIGHT, WIDTH, 24)
+    points = np.frombuffer(bytes(cloud.data), PIXEL_DTYPE).reshape(HEIGHT, WIDTH)
+    paper = points['hit'] == HIT_PAPER
+    # the sheet's footprint in the image: 0.21 m of 2 * 0.5 tan(0.5) = 0.546 m across
+    expected = (0.21 * 0.297) / (2 * HEIGHT_ABOVE * math.tan(0.5 * FOV)) ** 2 * WIDTH ** 2
+    assert paper.sum() == pytest.approx(expected, rel=0.1), (paper.sum(), expected)
+    # looking straight down with image up = +y: optical x = world x, optical y = -world y
+    np.testing.assert_allclose(points['u'][paper], points['x'][paper], atol=2e-3)
+    np.testing.assert_allclose(points['v'][paper], -points['y'][paper], atol=2e-3)
+    np.testing.assert_allclose(points['z'][paper], HEIGHT_ABOVE, atol=2e-3)
+
+
+@pytest.mark.parametrize('name, value, reason', [
+    ('camera.name', 'two words', 'camera.name'),
+    ('camera.target', [0.0, 0.0, 0.5], 'must differ'),
+    ('camera.position', [0.0, float('nan'), 0.5], 'finite'),
+    ('camera.rate', -1.0, 'camera.rate'),
+])
+def test_bad_camera_parameters_are_refused_with_a_reason(name, value, reason):
+    values = declared_defaults()
+    values['camera.position'] = [0.0, 0.0, 0.5]
+    values[name] = value
+    with pytest.raises(ValueError, match=reason):
+        settings_from_values(values)
