@@ -21,10 +21,11 @@ setup(
     # same as rosdep keys, but for numba and rerun-sdk, which have none: without rerun-sdk the
     # node runs and refuses only to record (README).
     install_requires=['setuptools', 'numpy', 'numba', 'scipy', 'pyyaml', 'pillow',
-                      'rerun-sdk==0.41.*'],
+                      'rerun-sdk==0.41.*', 'rosbags'],
     # what only the tests and the linters use (`make setup` installs '.[test]')
     extras_require={
-        'test': ['pytest', 'import-linter', 'flake8', 'colcon-core', 'colcon-ros',
+        'test': ['pytest', 'import-linter', 'flake8', 'mcap', 'mcap-ros2-support',
+                 'colcon-core', 'colcon-ros',
                  'colcon-python-setup-py', 'colcon-package-selection', 'colcon-output',
                  'colcon-library-path'],
     },

@@ -42,6 +42,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
+from .bag_recorder import BagRecorder, message_type_name
 from .core.appearance import PaperAppearance
 from .core.camera import render
 from .core.scenarios import pin_mask
@@ -155,6 +156,7 @@ class PaperSimNode(Node):
     def __init__(self, **node_kwargs) -> None:
         super().__init__(NODE_NAME, **node_kwargs)
         self._recorder = None
+        self._bag = None
         # the material first: its preset gives the other parameters their defaults
         material = self.declare_parameter('material', PARAMETER_SPECS['material'].default,
                                           _descriptor(PARAMETER_SPECS['material'])).value
@@ -181,6 +183,11 @@ class PaperSimNode(Node):
         self._warm_up()
 
         self._recorder = self._open_recorder(settings)
+        if settings.bag_path:
+            try:
+                self._bag = BagRecorder(settings.bag_path)
+            except (OSError, ValueError) as error:
+                raise StartupError(f'cannot write the bag: {error}') from None
         self._stats = Statistics(
             window_started=time.monotonic(),
             recent_strains=deque(maxlen=int(round(self._settings.physics_rate))))
@@ -451,8 +458,8 @@ class PaperSimNode(Node):
         labels = simulator.damage_labels()
         colors = None
         if want_points:
-            self._points_pub.publish(create_cloud(header, self._cloud_points(
-                sheet, normals, labels)))
+            self._send(self._points_pub, create_cloud(header, self._cloud_points(
+                sheet, normals, labels)), header.stamp)
         if want_markers or want_camera or recorder is not None:
             colors = self._appearance.vertex_colors(sheet)
         if want_camera:
@@ -464,10 +471,10 @@ class PaperSimNode(Node):
                                 aux_springs=settings.aux_springs,
                                 bend_springs=settings.bend_springs)
             # serialised by numpy: the same bytes as the MarkerArray object, 30x cheaper
-            self._markers_pub.publish(sheet_markers_cdr(
+            self._send(self._markers_pub, sheet_markers_cdr(
                 header, sheet.positions, sheet.triangles, colors, sheet.spring_vertices,
                 sheet.spring_kind, centers, radii, active, style,
-                delete_all=self._delete_all_pending))
+                delete_all=self._delete_all_pending), header.stamp)
             self._delete_all_pending = False
         if recorder is not None:
             stats = self._stats
@@ -491,10 +498,13 @@ class PaperSimNode(Node):
                        contact.ground_height if contact.ground_enabled else None)
         header = Header(frame_id=f'{camera.name}_optical_frame', stamp=header.stamp)
         depth_pub, color_pub, info_pub, points_pub = self._camera_pubs
-        depth_pub.publish(depth_image(header, frame))
-        color_pub.publish(color_image(header, frame))
-        info_pub.publish(camera_info(header, camera))
-        points_pub.publish(organized_cloud(header, camera, frame))
+        if self._bag is not None and not self._bag.counts.get('/tf_static'):
+            self._bag.write_camera_transform(settings.frame_id, camera,
+                                             Time.from_msg(header.stamp).nanoseconds)
+        self._send(depth_pub, depth_image(header, frame), header.stamp)
+        self._send(color_pub, color_image(header, frame), header.stamp)
+        self._send(info_pub, camera_info(header, camera), header.stamp)
+        self._send(points_pub, organized_cloud(header, camera, frame), header.stamp)
 
     def _cloud_points(self, sheet: Sheet, normals: np.ndarray, labels: np.ndarray):
         settings = self._settings
@@ -617,8 +627,8 @@ class PaperSimNode(Node):
         }
         status = diagnostic_status(DIAGNOSTIC_NAME, self.get_fully_qualified_name(), level,
                                    message, values)
-        self._diagnostics_pub.publish(diagnostic_array(self.get_clock().now().to_msg(),
-                                                       [status]))
+        now = self.get_clock().now().to_msg()
+        self._send(self._diagnostics_pub, diagnostic_array(now, [status]), now)
         stats.window_started = wall
         stats.window_frames = stats.window_steps = stats.window_publishes = 0
         stats.window_step_seconds = stats.window_step_max = stats.window_publish_seconds = 0.0
@@ -626,11 +636,22 @@ class PaperSimNode(Node):
         stats.window_dropped = dropped
 
     # -------------------------------------------------------------------------- shutdown
+    def _send(self, publisher, message, stamp) -> None:
+        """Publish, and record in the bag at ``stamp`` (the message's header stamp). The
+        markers come serialised already (bytes): recorded as MarkerArray."""
+        publisher.publish(message)
+        if self._bag is not None:
+            self._bag.write(publisher.topic_name, message, Time.from_msg(stamp).nanoseconds,
+                            message_type_name(publisher.msg_type))
+
     def destroy_node(self) -> None:
-        """Close the Rerun recording (so the file is complete), then the node."""
+        """Close the Rerun recording and the bag (so both are complete), then the node."""
         if self._recorder is not None:
             recorder, self._recorder = self._recorder, None
             recorder.close()
+        if self._bag is not None:
+            bag, self._bag = self._bag, None
+            bag.close()
         super().destroy_node()
 
 

@@ -67,6 +67,7 @@ class NodeSettings:
     rerun_connect: str
     camera: CameraConfig
     camera_rate: float
+    bag_path: str
 
 
 _SHEET = SheetConfig()
@@ -179,6 +180,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   read_only=True),
     ParameterSpec('rerun_connect', '', "Stream to a Rerun viewer at this URL "
                   "(rerun+http://127.0.0.1:9876/proxy); '': off.", read_only=True),
+    ParameterSpec('bag_path', '', "Record every published message to this rosbag2 directory "
+                  "(MCAP storage; it must not exist yet), with the camera's pose on "
+                  "/tf_static; '' : off.", read_only=True),
     ParameterSpec('camera.rate', 0.0, 'Rate of the virtual camera in simulated time [Hz]; '
                   '0: off. It publishes paper/<camera.name>/depth/image_raw (32FC1 [m], NaN '
                   'where nothing is hit), color/image_raw (rgb8), camera_info and points (an '
@@ -343,4 +347,5 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         rerun_connect=str(values['rerun_connect']),
         camera=camera_from_values(values),
         camera_rate=_rate(values, 'camera.rate'),
+        bag_path=str(values['bag_path']),
     )

@@ -1,0 +1,103 @@
+"""The node's rosbag2 output (issue 16): a session stopped by a signal leaves a complete MCAP
+bag that two independent readers (rosbags, and mcap with its ROS 2 decoder) read alike:
+every topic the node published, what a subscriber received, stamps in order, the camera on
+/tf_static. A bag path that exists is refused before anything runs."""
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader
+from sensor_msgs.msg import CameraInfo, PointCloud2
+
+from paper_sim_ros.bag_recorder import TYPESTORE
+from ros_harness import RosClient, new_domain_id, start_node
+
+TOPICS = {'/paper/points': 'sensor_msgs/msg/PointCloud2',
+          '/paper/markers': 'visualization_msgs/msg/MarkerArray',
+          '/paper/eye/depth/image_raw': 'sensor_msgs/msg/Image',
+          '/paper/eye/color/image_raw': 'sensor_msgs/msg/Image',
+          '/paper/eye/camera_info': 'sensor_msgs/msg/CameraInfo',
+          '/paper/eye/points': 'sensor_msgs/msg/PointCloud2',
+          '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+          '/tf_static': 'tf2_msgs/msg/TFMessage'}
+EYE = [0.1, -0.2, 0.4]
+
+
+def stamp_ns(header) -> int:
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM],
+                         ids=['SIGINT', 'SIGTERM'])
+def test_a_session_stopped_by_a_signal_leaves_a_complete_bag(tmp_path, signal_number):
+    bag = tmp_path / 'session'
+    domain = new_domain_id()
+    process = start_node(tmp_path, {
+        'sheet.nx': 17, 'sheet.ny': 17, 'publish_rate': 10.0, 'markers_rate': 2.0,
+        'diagnostics_rate': 2.0, 'camera.rate': 5.0, 'camera.name': 'eye',
+        'camera.width': 64, 'camera.height': 48, 'camera.position': EYE,
+        'bag_path': str(bag)}, domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        client.subscribe(CameraInfo, 'paper/eye/camera_info')
+        client.spin_until(lambda: len(client.messages('paper/eye/camera_info')) >= 4, 90,
+                          'four camera frames', process)
+        received = {stamp_ns(m.header) for m in client.messages('paper/points')}
+    finally:
+        client.close()
+    assert process.stop(signal_number) == 0, process.output()[-3000:]
+
+    # rosbags: every topic, decodable, stamps in order, what the subscriber got is there
+    by_topic: dict[str, list] = {}
+    with Reader(bag) as reader:
+        assert {c.topic: c.msgtype for c in reader.connections} == TOPICS
+        for connection, timestamp, raw in reader.messages():
+            message = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
+            by_topic.setdefault(connection.topic, []).append((timestamp, message))
+    for topic, items in by_topic.items():
+        times = [timestamp for timestamp, _ in items]
+        assert times == sorted(times), topic
+    points = {stamp_ns(m.header) for _, m in by_topic['/paper/points']}
+    assert received and received <= points, (len(received), len(points))
+    assert len(by_topic['/paper/eye/camera_info']) >= 4
+    for topic in ('/paper/eye/depth/image_raw', '/paper/eye/color/image_raw',
+                  '/paper/eye/points'):  # one of each per camera frame, same stamps
+        assert [t for t, _ in by_topic[topic]] == [t for t, _ in by_topic[
+            '/paper/eye/camera_info']], topic
+    (_, tf), = by_topic['/tf_static']
+    transform, = tf.transforms
+    assert transform.child_frame_id == 'eye_optical_frame'
+    assert transform.header.frame_id == 'world'
+    np.testing.assert_allclose([transform.transform.translation.x,
+                                transform.transform.translation.y,
+                                transform.transform.translation.z], EYE)
+    depth = by_topic['/paper/eye/depth/image_raw'][-1][1]
+    assert (depth.encoding, depth.width, depth.height) == ('32FC1', 64, 48)
+
+    # mcap with its own ROS 2 decoder: the same messages
+    (mcap_file,) = Path(bag).glob('*.mcap')
+    counts: dict[str, int] = {}
+    with open(mcap_file, 'rb') as stream:
+        for _, channel, _, decoded in make_reader(
+                stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == '/paper/eye/camera_info':
+                assert decoded.width == 64 and decoded.distortion_model == 'plumb_bob'
+    assert counts == {topic: len(items) for topic, items in by_topic.items()}
+
+
+def test_an_existing_bag_path_is_refused_before_anything_runs(tmp_path):
+    bag = tmp_path / 'taken'
+    bag.mkdir()
+    process = start_node(tmp_path, {'sheet.nx': 9, 'sheet.ny': 9, 'bag_path': str(bag)},
+                         domain_id=new_domain_id())
+    process.process.wait(60)  # it exits by itself
+    code = process.stop()
+    assert code == 1 and 'cannot write the bag' in process.output() \
+        and 'exists' in process.output(), process.output()[-2000:]
