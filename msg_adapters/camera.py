@@ -85,3 +85,11 @@ def organized_cloud(header: Header, config: CameraConfig, frame: CameraFrame) ->
         fields=point_fields(PIXEL_DTYPE), is_bigendian=False,
         point_step=PIXEL_DTYPE.itemsize, row_step=PIXEL_DTYPE.itemsize * config.width,
         is_dense=bool(np.isfinite(frame.depth).all())), points)
+
+
+def camera_messages(header: Header, config: CameraConfig,
+                    frame: CameraFrame) -> tuple[Image, Image, CameraInfo, PointCloud2]:
+    """The four messages of one camera frame under one header (in the camera's optical
+    frame): depth, colour, camera info, organised cloud."""
+    return (depth_image(header, frame), color_image(header, frame),
+            camera_info(header, config), organized_cloud(header, config, frame))

@@ -74,7 +74,7 @@ class BagRecorder:
         x, y, z = camera.position
         qx, qy, qz, qw = camera.orientation
         transform = types['geometry_msgs/msg/TransformStamped'](
-            header=header, child_frame_id=f'{camera.name}_optical_frame',
+            header=header, child_frame_id=camera.optical_frame,
             transform=types['geometry_msgs/msg/Transform'](
                 translation=types['geometry_msgs/msg/Vector3'](x=x, y=y, z=z),
                 rotation=types['geometry_msgs/msg/Quaternion'](x=qx, y=qy, z=qz, w=qw)))

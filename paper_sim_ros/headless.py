@@ -36,6 +36,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help='switch breaks and folds off (the sheet behaves like rubber)')
     parser.add_argument('--metrics-json', help='write the metrics to this JSON file')
     parser.add_argument('--rrd', help='record the run to this Rerun .rrd file')
+    parser.add_argument('--bag', metavar='DIR',
+                        help='write what the node would publish (paper/points every frame, the '
+                             'default camera, /tf_static) to this new rosbag2 directory (MCAP)')
+    parser.add_argument('--camera-rate', type=float, default=15.0,
+                        help='rate of the default camera in --bag [Hz] (default 15; 0: off)')
     parser.add_argument('--replay', metavar='FILE.rrd',
                         help='re-run a recorded session: its scenario, parameters and seed, '
                              'driven by its recorded probe inputs')
@@ -80,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.replay:
         return replay_command(args)
     recorder = None
+    bag = None
     # from here on SIGTERM unwinds like Ctrl-C, so a recording is always closed
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     try:
@@ -89,30 +95,42 @@ def main(argv: list[str] | None = None) -> int:
                                  damage_enabled=False if args.no_damage else None)
         simulator = build_simulator(scenario)
         check_metrics_path(args.metrics_json)
-        on_frame = None
+        outputs: list[Callable[[Simulator, float], None]] = []
         if args.rrd:
             recorder = RerunRecorder('paper_sim_headless', path=args.rrd,
                                      recording_info={'scenario': scenario.mapping},
                                      appearance=scenario.appearance)
-            on_frame = _recording_callback(recorder, scenario.config.solver.dt)
+            outputs.append(_recording_callback(recorder, scenario.config.solver.dt))
+        if args.bag:
+            # only a bag needs the ROS message packages
+            from .headless_bag import HeadlessBag
+            bag = HeadlessBag(args.bag, scenario, simulator, args.camera_rate)
+            outputs.append(lambda simulator, step_seconds: bag.on_frame(simulator))
     except (ValueError, OSError) as error:
-        if recorder is not None:
-            recorder.close()
+        _close(recorder, bag)
         return _error(error)
     except KeyboardInterrupt:
-        if recorder is not None:
-            recorder.close()
+        _close(recorder, bag)
         return _interrupted()
     try:
         warm_up()
-        metrics = run_scenario(scenario, on_frame=on_frame, simulator=simulator)
+        metrics = run_scenario(
+            scenario, simulator=simulator,
+            on_frame=lambda simulator, seconds: [output(simulator, seconds)
+                                                 for output in outputs])
     except KeyboardInterrupt:
         return _interrupted()
     finally:
-        if recorder is not None:
-            recorder.close()
+        _close(recorder, bag)
     emit_metrics(metrics, args.metrics_json)
     return 0
+
+
+def _close(*outputs) -> None:
+    """Close whatever recordings were opened, so that each is complete."""
+    for output in outputs:
+        if output is not None:
+            output.close()
 
 
 def replay_command(args: argparse.Namespace) -> int:

@@ -44,12 +44,12 @@ from visualization_msgs.msg import MarkerArray
 
 from .bag_recorder import BagRecorder, message_type_name
 from .core.appearance import PaperAppearance
-from .core.camera import render
+from .core.camera import render_simulator
 from .core.scenarios import pin_mask
 from .core.sheet import AUX, BEND, HINGE, Sheet
 from .core.simulator import Simulator
 from .core.topology import vertex_normals
-from .msg_adapters.camera import camera_info, color_image, depth_image, organized_cloud
+from .msg_adapters.camera import camera_messages
 from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
@@ -463,7 +463,7 @@ class PaperSimNode(Node):
         if want_markers or want_camera or recorder is not None:
             colors = self._appearance.vertex_colors(sheet)
         if want_camera:
-            self._publish_camera(header, sheet, labels, colors)
+            self._publish_camera(header, colors)
         if want_markers:
             centers, radii, active = (simulator.probes.end, simulator.probes.radius,
                                       simulator.probes.active)
@@ -484,27 +484,19 @@ class PaperSimNode(Node):
         self._stats.window_publish_seconds += time.perf_counter() - started
         self._stats.window_publishes += 1
 
-    def _publish_camera(self, header: Header, sheet: Sheet, labels: np.ndarray,
-                        colors: np.ndarray) -> None:
+    def _publish_camera(self, header: Header, colors: np.ndarray) -> None:
         """What the virtual camera sees, its four messages under one header in its optical
         frame."""
         settings = self._settings
-        simulator = self.simulator
-        contact = simulator.config.contact
         camera = settings.camera
-        frame = render(camera, sheet.positions, sheet.triangles, sheet.material, labels,
-                       colors, simulator.probes.end, simulator.probes.radius,
-                       simulator.probes.active,
-                       contact.ground_height if contact.ground_enabled else None)
-        header = Header(frame_id=f'{camera.name}_optical_frame', stamp=header.stamp)
-        depth_pub, color_pub, info_pub, points_pub = self._camera_pubs
+        frame = render_simulator(camera, self.simulator, colors)
+        header = Header(frame_id=camera.optical_frame, stamp=header.stamp)
         if self._bag is not None and not self._bag.counts.get('/tf_static'):
             self._bag.write_camera_transform(settings.frame_id, camera,
                                              Time.from_msg(header.stamp).nanoseconds)
-        self._send(depth_pub, depth_image(header, frame), header.stamp)
-        self._send(color_pub, color_image(header, frame), header.stamp)
-        self._send(info_pub, camera_info(header, camera), header.stamp)
-        self._send(points_pub, organized_cloud(header, camera, frame), header.stamp)
+        for publisher, message in zip(self._camera_pubs,
+                                      camera_messages(header, camera, frame)):
+            self._send(publisher, message, header.stamp)
 
     def _cloud_points(self, sheet: Sheet, normals: np.ndarray, labels: np.ndarray):
         settings = self._settings

@@ -19,7 +19,7 @@ import math
 from typing import Any, Mapping
 
 from .core.appearance import FULL_DETAIL_LEVEL, AppearanceConfig
-from .core.camera import CameraConfig, look_at
+from .core.camera import DEFAULT_POSITION, DEFAULT_TARGET, CameraConfig, look_at
 from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
                           SolverConfig, from_mapping)
 from .core.materials import MATERIAL_PRESETS, material_preset
@@ -196,9 +196,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   read_only=True),
     ParameterSpec('camera.horizontal_fov', _CAMERA.horizontal_fov, 'Horizontal field of '
                   'view [rad].', (0.01, 3.1), read_only=True),
-    ParameterSpec('camera.position', [0.3, -0.35, 0.5], 'Optical centre in frame_id: x y z '
+    ParameterSpec('camera.position', list(DEFAULT_POSITION), 'Optical centre in frame_id: x y z '
                   '[m] (default: above the table, oblique).', read_only=True),
-    ParameterSpec('camera.target', [0.0, 0.0, 0.0], 'Point the optical axis goes through, in '
+    ParameterSpec('camera.target', list(DEFAULT_TARGET), 'Point the optical axis goes through, in '
                   'frame_id: x y z [m]; image up is towards +z (+y looking straight down).',
                   read_only=True),
     ParameterSpec('damage.enabled', _DAMAGE.enabled, 'Breaks and folds happen (SPEC section '

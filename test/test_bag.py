@@ -15,6 +15,7 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import CameraInfo, PointCloud2
 
 from paper_sim_ros.bag_recorder import TYPESTORE
+from paper_sim_ros.headless import main as headless_main
 from ros_harness import RosClient, new_domain_id, start_node
 
 TOPICS = {'/paper/points': 'sensor_msgs/msg/PointCloud2',
@@ -53,16 +54,11 @@ def test_a_session_stopped_by_a_signal_leaves_a_complete_bag(tmp_path, signal_nu
         client.close()
     assert process.stop(signal_number) == 0, process.output()[-3000:]
 
-    # rosbags: every topic, decodable, stamps in order, what the subscriber got is there
-    by_topic: dict[str, list] = {}
+    # both readers: every topic, decodable, alike, stamps in order
     with Reader(bag) as reader:
         assert {c.topic: c.msgtype for c in reader.connections} == TOPICS
-        for connection, timestamp, raw in reader.messages():
-            message = TYPESTORE.deserialize_cdr(raw, connection.msgtype)
-            by_topic.setdefault(connection.topic, []).append((timestamp, message))
-    for topic, items in by_topic.items():
-        times = [timestamp for timestamp, _ in items]
-        assert times == sorted(times), topic
+    by_topic = read_with_both_readers(bag)
+    # what the subscriber got is there
     points = {stamp_ns(m.header) for _, m in by_topic['/paper/points']}
     assert received and received <= points, (len(received), len(points))
     assert len(by_topic['/paper/eye/camera_info']) >= 4
@@ -80,17 +76,6 @@ def test_a_session_stopped_by_a_signal_leaves_a_complete_bag(tmp_path, signal_nu
     depth = by_topic['/paper/eye/depth/image_raw'][-1][1]
     assert (depth.encoding, depth.width, depth.height) == ('32FC1', 64, 48)
 
-    # mcap with its own ROS 2 decoder: the same messages
-    (mcap_file,) = Path(bag).glob('*.mcap')
-    counts: dict[str, int] = {}
-    with open(mcap_file, 'rb') as stream:
-        for _, channel, _, decoded in make_reader(
-                stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
-            counts[channel.topic] = counts.get(channel.topic, 0) + 1
-            if channel.topic == '/paper/eye/camera_info':
-                assert decoded.width == 64 and decoded.distortion_model == 'plumb_bob'
-    assert counts == {topic: len(items) for topic, items in by_topic.items()}
-
 
 def test_an_existing_bag_path_is_refused_before_anything_runs(tmp_path):
     bag = tmp_path / 'taken'
@@ -101,3 +86,51 @@ def test_an_existing_bag_path_is_refused_before_anything_runs(tmp_path):
     code = process.stop()
     assert code == 1 and 'cannot write the bag' in process.output() \
         and 'exists' in process.output(), process.output()[-2000:]
+
+
+def read_with_both_readers(bag: Path) -> dict[str, list]:
+    """Messages per topic as rosbags decodes them, checked against the mcap decoder's
+    counts and against the stamps in order."""
+    by_topic: dict[str, list] = {}
+    with Reader(bag) as reader:
+        for connection, timestamp, raw in reader.messages():
+            by_topic.setdefault(connection.topic, []).append(
+                (timestamp, TYPESTORE.deserialize_cdr(raw, connection.msgtype)))
+    (mcap_file,) = Path(bag).glob('*.mcap')
+    counts: dict[str, int] = {}
+    with open(mcap_file, 'rb') as stream:
+        for _, channel, _, _ in make_reader(
+                stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+    assert counts == {topic: len(items) for topic, items in by_topic.items()}
+    for topic, items in by_topic.items():
+        times = [timestamp for timestamp, _ in items]
+        assert times == sorted(times), topic
+    return by_topic
+
+
+def test_headless_bag_holds_the_run_with_the_default_camera(tmp_path, capsys):
+    bag = tmp_path / 'press'
+    assert headless_main(['--scenario', 'press', '--grid', '17', '--duration', '0.5',
+                          '--bag', str(bag), '--camera-rate', '10']) == 0
+    by_topic = read_with_both_readers(bag)
+    assert len(by_topic['/paper/points']) == 30  # every frame of 0.5 s at 60 Hz
+    # camera slots k / 10 s reached from 1/60 s to 0.5 s: k = 0..5
+    for suffix in ('depth/image_raw', 'color/image_raw', 'camera_info', 'points'):
+        assert len(by_topic[f'/paper/camera/{suffix}']) == 6, suffix
+    cloud = by_topic['/paper/points'][-1][1]
+    assert cloud.width == 17 * 17 and cloud.header.frame_id == 'world'
+    depth = by_topic['/paper/camera/depth/image_raw'][-1][1]
+    assert (depth.width, depth.height, depth.header.frame_id) == (640, 480,
+                                                                  'camera_optical_frame')
+    pixels = np.frombuffer(bytes(depth.data), '<f4')
+    assert np.isfinite(pixels).mean() > 0.5, 'the camera sees the sheet and the table'
+    (_, tf), = by_topic['/tf_static']
+    assert tf.transforms[0].child_frame_id == 'camera_optical_frame'
+
+
+def test_headless_refuses_an_existing_bag_directory(tmp_path, capsys):
+    (tmp_path / 'taken').mkdir()
+    assert headless_main(['--scenario', 'press', '--grid', '9', '--duration', '0.1',
+                          '--bag', str(tmp_path / 'taken')]) == 2
+    assert 'exists' in capsys.readouterr().err

@@ -113,6 +113,11 @@ class CameraConfig:
                  and self.near > 0, f'near must be a finite number > 0 m, got {self.near!r}')
 
     @property
+    def optical_frame(self) -> str:
+        """The frame id of its messages: ``<name>_optical_frame`` (REP 103)."""
+        return f'{self.name}_optical_frame'
+
+    @property
     def focal_x(self) -> float:
         """fx [pixels]."""
         if self.fx is not None:
@@ -485,3 +490,26 @@ def render(config: CameraConfig, sheet_positions: np.ndarray, triangles: np.ndar
                   np.array(TABLE_COLOR, np.uint8), frame.depth, frame.rgb, frame.u,
                   frame.v, frame.label, frame.hit)
     return frame
+
+
+DEFAULT_POSITION = (0.3, -0.35, 0.5)
+"""Where the default camera is [m]: above the table, oblique to an A4 sheet at the origin."""
+DEFAULT_TARGET = (0.0, 0.0, 0.0)
+"""What the default camera looks at [m]."""
+
+
+def default_camera(name: str = 'camera') -> CameraConfig:
+    """640 × 480, 1 rad wide, at DEFAULT_POSITION looking at DEFAULT_TARGET, image up +z."""
+    return CameraConfig(name=name, position=DEFAULT_POSITION,
+                        orientation=look_at(DEFAULT_POSITION, DEFAULT_TARGET))
+
+
+def render_simulator(config: CameraConfig, simulator, vertex_colors: np.ndarray) -> CameraFrame:
+    """What ``config`` sees of a ``core.simulator.Simulator`` now: its sheet (coloured
+    ``vertex_colors``, labelled by ``damage_labels``), its active probes and its table."""
+    sheet = simulator.sheet
+    contact = simulator.config.contact
+    probes = simulator.probes
+    return render(config, sheet.positions, sheet.triangles, sheet.material,
+                  simulator.damage_labels(), vertex_colors, probes.end, probes.radius,
+                  probes.active, contact.ground_height if contact.ground_enabled else None)
