@@ -39,7 +39,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--bag', metavar='DIR',
                         help='write what the node would publish (paper/points every frame, the '
                              'default camera, /tf_static) to this new rosbag2 directory (MCAP)')
-    parser.add_argument('--camera-rate', type=float, default=15.0,
+    parser.add_argument('--camera-rate', type=float,
                         help='rate of the default camera in --bag [Hz] (default 15; 0: off)')
     parser.add_argument('--replay', metavar='FILE.rrd',
                         help='re-run a recorded session: its scenario, parameters and seed, '
@@ -95,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
                                  damage_enabled=False if args.no_damage else None)
         simulator = build_simulator(scenario)
         check_metrics_path(args.metrics_json)
+        if args.camera_rate is not None and not args.bag:
+            raise ValueError('--camera-rate is the rate of the camera in --bag; give --bag DIR')
         outputs: list[Callable[[Simulator, float], None]] = []
         if args.rrd:
             recorder = RerunRecorder('paper_sim_headless', path=args.rrd,

@@ -21,13 +21,16 @@ from .msg_adapters.camera import camera_messages
 from .msg_adapters.point_cloud import create_cloud, sheet_points
 
 FRAME_ID = 'world'
+DEFAULT_CAMERA_RATE = 15.0
+"""The default camera's rate in a bag [Hz, simulated time]."""
 
 
 class HeadlessBag:
     """Writes one run into a bag; ``on_frame`` after every frame, ``close`` at the end."""
 
     def __init__(self, path: str, scenario: Scenario, simulator: Simulator,
-                 camera_rate: float) -> None:
+                 camera_rate: float | None) -> None:
+        camera_rate = DEFAULT_CAMERA_RATE if camera_rate is None else camera_rate
         if not (math.isfinite(camera_rate) and camera_rate >= 0):
             raise ValueError(f'--camera-rate must be finite and >= 0 Hz, got {camera_rate}')
         self._bag = BagRecorder(path)

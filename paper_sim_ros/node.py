@@ -250,7 +250,9 @@ class PaperSimNode(Node):
             return RerunRecorder('paper_sim_ros', settings.rerun_path or None,
                                  settings.rerun_connect or None,
                                  {'node': self.get_fully_qualified_name(),
-                                  'parameters': dict(self._values)})
+                                  'parameters': dict(self._values)},
+                                 cameras=(settings.camera.name,) if settings.camera_rate > 0
+                                 else ())
         except (OSError, ValueError, RuntimeError) as error:
             raise StartupError(f'cannot record to Rerun: {error}') from None
 
@@ -497,6 +499,8 @@ class PaperSimNode(Node):
         for publisher, message in zip(self._camera_pubs,
                                       camera_messages(header, camera, frame)):
             self._send(publisher, message, header.stamp)
+        if self._recorder is not None:
+            self._recorder.log_camera(self._recording_time(), self.simulator, camera, frame)
 
     def _cloud_points(self, sheet: Sheet, normals: np.ndarray, labels: np.ndarray):
         settings = self._settings

@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 
 from .core.appearance import AppearanceConfig, PaperAppearance
+from .core.camera import intrinsics
 from .core.sheet import AUX, HINGE
 from .core.topology import vertex_normals
 
@@ -55,6 +56,7 @@ ENTITY_SPRINGS = {HINGE: 'paper/springs/hinge', AUX: 'paper/springs/aux'}
 ENTITY_PROBES = 'paper/probes'
 ENTITY_PROBE_INPUTS = 'paper/inputs/probes'
 ENTITY_METRICS = 'paper/metrics'
+ENTITY_CAMERAS = 'paper/cameras'
 TIMELINE = 'sim_time'
 FRAME_TIMELINE = 'frame'
 INFO_COMPONENT = 'recording_info_json'
@@ -153,9 +155,11 @@ def _segments(positions: np.ndarray, ends: np.ndarray, strip_type):
     return pa.ListArray.from_arrays(offsets, inner, type=strip_type)
 
 
-def default_blueprint(center: np.ndarray | None = None, size: float | None = None):
+def default_blueprint(center: np.ndarray | None = None, size: float | None = None,
+                      cameras: tuple[str, ...] = ()):
     """A 3D view of the sheet beside the metric plots and the session info. With the sheet's
-    ``center`` and ``size`` [m], the camera looks at it obliquely from the front, low side."""
+    ``center`` and ``size`` [m], the camera looks at it obliquely from the front, low side.
+    Each virtual camera of ``cameras`` (names) gets a 2-D view of what it saw."""
     import rerun.blueprint as rrb
 
     def plot(name: str, *entities: str):
@@ -168,7 +172,10 @@ def default_blueprint(center: np.ndarray | None = None, size: float | None = Non
             [0.45, -0.85, 0.62])), look_target=tuple(center), eye_up=(0.0, 0.0, 1.0))
     view_3d = rrb.Spatial3DView(
         name='sheet', origin='/paper',
-        contents=['+ /paper/mesh', '+ /paper/springs/**', '+ /paper/probes'],
+        # cameras as frusta; their depth images, projected into 3-D, would bury the sheet
+        contents=['+ /paper/mesh', '+ /paper/springs/**', '+ /paper/probes',
+                  f'+ /{ENTITY_CAMERAS}/**'] + [f'- /{ENTITY_CAMERAS}/{name}/depth'
+                                                for name in cameras],
         eye_controls=eye)
     plots = rrb.Grid(
         plot('step time [s]', 'step_time'),
@@ -179,9 +186,13 @@ def default_blueprint(center: np.ndarray | None = None, size: float | None = Non
         plot('vertices', 'vertices'),
         grid_columns=2)
     info = rrb.TextDocumentView(name='session', origin=f'/{ENTITY_INFO}')
+    # what each camera saw, in colour (its depth is in the recording beside it)
+    views = [rrb.Spatial2DView(name=name, origin=f'/{ENTITY_CAMERAS}/{name}',
+                               contents=[f'+ /{ENTITY_CAMERAS}/{name}/rgb'])
+             for name in cameras]
+    right = rrb.Vertical(plots, *views, info, row_shares=[3] + [2] * len(views) + [1])
     return rrb.Blueprint(
-        rrb.Horizontal(view_3d, rrb.Vertical(plots, info, row_shares=[3, 1]),
-                       column_shares=[3, 2]),
+        rrb.Horizontal(view_3d, right, column_shares=[3, 2]),
         rrb.BlueprintPanel(state='collapsed'),
         rrb.SelectionPanel(state='collapsed'),
         rrb.TimePanel(timeline=TIMELINE))
@@ -220,7 +231,8 @@ class RerunRecorder:
 
     def __init__(self, application_id: str, path: str | None = None,
                  connect_url: str | None = None, recording_info: dict | None = None,
-                 *, hinge_every: int = 1, appearance: AppearanceConfig | None = None) -> None:
+                 *, hinge_every: int = 1, appearance: AppearanceConfig | None = None,
+                 cameras: tuple[str, ...] = ()) -> None:
         if not isinstance(hinge_every, int) or hinge_every < 0:
             raise ValueError(f'hinge_every must be an integer >= 0 (0: never), '
                              f'got {hinge_every!r}')
@@ -228,6 +240,7 @@ class RerunRecorder:
         self.path = check_writable_rrd(path) if path else None
         self.connect_url = connect_url or None
         self.hinge_every = hinge_every
+        self._cameras = tuple(cameras)
         self._appearance_config = appearance if appearance is not None else AppearanceConfig()
         self._lock = threading.RLock()
         self._stream = None
@@ -302,21 +315,17 @@ class RerunRecorder:
         (energy, max_strain, breaks, folds and vertices are taken from the simulator when
         absent).
         """
-        if not self.enabled:
-            return
-        with self._lock, _signals_deferred():
-            if not self.enabled:
+        with self._logging_at(sim_time, simulator) as stream:
+            if stream is None:
                 return
             rr = self._rr
-            stream = self._stream
             sheet = simulator.sheet
-            self._set_time(sim_time, simulator)
             if not self._parameters_logged:
                 self._log_parameters(simulator)
                 positions = sheet.positions
                 low, high = positions.min(axis=0), positions.max(axis=0)
                 stream.send_blueprint(default_blueprint(
-                    0.5 * (low + high), float(max(np.max(high - low), 0.05))))
+                    0.5 * (low + high), float(max(np.max(high - low), 0.05)), self._cameras))
             self._log_mesh(sheet, vertex_colors)
             self._log_springs(sheet)
             probes = simulator.probes
@@ -328,6 +337,23 @@ class RerunRecorder:
             self._log_scalars(simulator, scalars or {})
             self._frames_logged += 1
 
+    def log_camera(self, sim_time: float, simulator, config, frame) -> None:
+        """What a virtual camera (``core.camera.CameraConfig``) saw at ``sim_time``: its pose
+        and pinhole under ``paper/cameras/<name>`` (so the 3-D view shows its frustum), its
+        depth [m] and colour images."""
+        with self._logging_at(sim_time, simulator) as stream:
+            if stream is None:
+                return
+            rr = self._rr
+            entity = f'{ENTITY_CAMERAS}/{config.name}'
+            stream.log(entity, rr.Transform3D(translation=config.position,
+                                              quaternion=config.orientation))
+            stream.log(entity, rr.Pinhole(image_from_camera=intrinsics(config),
+                                          resolution=[config.width, config.height],
+                                          camera_xyz=rr.ViewCoordinates.RDF))
+            stream.log(f'{entity}/depth', rr.DepthImage(frame.depth, meter=1.0))
+            stream.log(f'{entity}/rgb', rr.Image(frame.rgb))
+
     def log_inputs(self, sim_time: float, simulator) -> None:
         """Log only the probe inputs of a frame (for a caller that steps frames it does not
         publish: the replay then still has every frame's input)."""
@@ -337,6 +363,20 @@ class RerunRecorder:
             if self.enabled:
                 self._set_time(sim_time, simulator)
                 self._log_probe_inputs(simulator.probes)
+
+    @contextlib.contextmanager
+    def _logging_at(self, sim_time: float, simulator):
+        """The stream, its clock at ``sim_time``, held for one frame's logging with signals
+        deferred (so a frame is whole in the file); None once closed."""
+        if not self.enabled:
+            yield None
+            return
+        with self._lock, _signals_deferred():
+            if not self.enabled:
+                yield None
+                return
+            self._set_time(sim_time, simulator)
+            yield self._stream
 
     def _set_time(self, sim_time: float, simulator) -> None:
         self._stream.set_time(TIMELINE, duration=float(sim_time))

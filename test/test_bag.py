@@ -134,3 +134,9 @@ def test_headless_refuses_an_existing_bag_directory(tmp_path, capsys):
     assert headless_main(['--scenario', 'press', '--grid', '9', '--duration', '0.1',
                           '--bag', str(tmp_path / 'taken')]) == 2
     assert 'exists' in capsys.readouterr().err
+
+
+def test_headless_camera_rate_needs_a_bag(tmp_path, capsys):
+    assert headless_main(['--scenario', 'press', '--grid', '9', '--duration', '0.1',
+                          '--camera-rate', '5']) == 2
+    assert '--bag' in capsys.readouterr().err
