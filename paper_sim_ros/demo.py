@@ -48,9 +48,13 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--out', default='out', help='output directory (default out)')
     parser.add_argument('--grid', type=int, default=33, help='vertices a side (default 33)')
     parser.add_argument('--no-record', action='store_true', help='do not write demo.rrd')
+    parser.add_argument('--camera-rate', type=float, default=10.0,
+                        help='the virtual camera (paper/camera/...) [Hz] (default 10; 0: off)')
     arguments = parser.parse_args(argv)
     if not (arguments.duration > 0):
         parser.error('--duration must be > 0')
+    if not (0 <= arguments.camera_rate <= 1000):
+        parser.error('--camera-rate must be in [0, 1000] Hz')
     return arguments
 
 
@@ -73,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
             Parameter('pin_mode', value='short_edge'),
             Parameter('contact.ground_height', value=-0.2),
             Parameter('publish_rate', value=15.0),
+            Parameter('camera.rate', value=arguments.camera_rate),
             Parameter('rerun_path', value=recording),
         ])
         nodes.append(simulation)
@@ -82,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
             executor.add_node(node)
         print(f'paper_sim demo: {arguments.duration:g} s, grid {arguments.grid}, ROS domain '
               f'{os.environ.get("ROS_DOMAIN_ID", "0")}; topics /paper/markers /paper/points '
-              f'/diagnostics', flush=True)
+              f'/paper/camera/... /diagnostics', flush=True)
         started = time.monotonic()
         end = started + arguments.duration
         while time.monotonic() < end and rclpy.ok():
