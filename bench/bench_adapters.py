@@ -91,7 +91,7 @@ def bench_grid(grid: int, repeat: int) -> None:
     labels_seconds, labels = best_of(repeat, simulator.damage_labels)
     colors_seconds, colors = best_of(repeat, lambda: appearance.vertex_colors(sheet))
     cloud_seconds, cloud = best_of(repeat, lambda: create_cloud(
-        header, sheet_points(sheet.positions, normals, labels)))
+        header, sheet_points(sheet.positions, normals, labels, sheet.material)))
     cloud_serialize, cloud_bytes = best_of(repeat, lambda: serialize_message(cloud))
     probes = simulator.probes
 

@@ -4,7 +4,7 @@ Modelled on ``sensor_msgs_py.point_cloud2`` (not installable here): pure functio
 field table as a module constant, and the message data taken as bytes from numpy. There is
 no per-point Python loop anywhere in this module.
 
-Cloud layout (little endian, ``point_step`` = 28, one row, ``is_dense`` = True):
+Cloud layout (little endian, ``point_step`` = 36, one row, ``is_dense`` = True):
 
     offset  name       type
      0      x          float32   [m]
@@ -15,6 +15,8 @@ Cloud layout (little endian, ``point_step`` = 28, one row, ``is_dense`` = True):
     20      normal_z   float32
     24      label      uint16    damage label (``paper_sim_ros.core.damage_labels``)
     26      (2 bytes padding, zero)
+    28      u          float32   material x [m]: where the point is on the undeformed sheet
+    32      v          float32   material y [m] (ground truth for a tracker)
 """
 from __future__ import annotations
 
@@ -26,10 +28,10 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 
 POINT_DTYPE = np.dtype({
-    'names': ['x', 'y', 'z', 'normal_x', 'normal_y', 'normal_z', 'label'],
-    'formats': ['<f4', '<f4', '<f4', '<f4', '<f4', '<f4', '<u2'],
-    'offsets': [0, 4, 8, 12, 16, 20, 24],
-    'itemsize': 28,
+    'names': ['x', 'y', 'z', 'normal_x', 'normal_y', 'normal_z', 'label', 'u', 'v'],
+    'formats': ['<f4', '<f4', '<f4', '<f4', '<f4', '<f4', '<u2', '<f4', '<f4'],
+    'offsets': [0, 4, 8, 12, 16, 20, 24, 28, 32],
+    'itemsize': 36,
 })
 """One point of ``paper/points``."""
 
@@ -90,31 +92,39 @@ def create_cloud(header: Header, points: np.ndarray) -> PointCloud2:
         row_step=points.dtype.itemsize * int(points.shape[0]), is_dense=bool(finite)), points)
 
 
-def sheet_points(positions: np.ndarray, normals: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """One POINT_DTYPE row per vertex. Raises ValueError on shape mismatch or on
-    non-finite input, so that a cloud never carries NaN."""
+def sheet_points(positions: np.ndarray, normals: np.ndarray, labels: np.ndarray,
+                 material: np.ndarray) -> np.ndarray:
+    """One POINT_DTYPE row per vertex (``material``: (V, 2) material coordinates [m]).
+    Raises ValueError on shape mismatch or on non-finite input, so that a cloud never
+    carries NaN."""
     positions = np.asarray(positions)
     normals = np.asarray(normals)
     labels = np.asarray(labels)
+    material = np.asarray(material)
     count = positions.shape[0]
-    if positions.shape != (count, 3) or normals.shape != (count, 3) or labels.shape != (count,):
-        raise ValueError(f'positions {positions.shape}, normals {normals.shape} and labels '
-                         f'{labels.shape} must be (V, 3), (V, 3), (V,)')
-    if not (np.isfinite(positions).all() and np.isfinite(normals).all()):
-        raise ValueError('positions and normals must be finite')
+    if positions.shape != (count, 3) or normals.shape != (count, 3) \
+            or labels.shape != (count,) or material.shape != (count, 2):
+        raise ValueError(f'positions {positions.shape}, normals {normals.shape}, labels '
+                         f'{labels.shape} and material {material.shape} must be (V, 3), '
+                         f'(V, 3), (V,), (V, 2)')
+    if not (np.isfinite(positions).all() and np.isfinite(normals).all()
+            and np.isfinite(material).all()):
+        raise ValueError('positions, normals and material must be finite')
     points = np.zeros(count, dtype=POINT_DTYPE)
     points['x'], points['y'], points['z'] = positions.T
     points['normal_x'], points['normal_y'], points['normal_z'] = normals.T
     points['label'] = labels
+    points['u'], points['v'] = material.T
     return points
 
 
 def dense_surface_points(positions: np.ndarray, normals: np.ndarray, labels: np.ndarray,
-                         triangles: np.ndarray, samples_per_triangle: int,
+                         material: np.ndarray, triangles: np.ndarray, samples_per_triangle: int,
                          noise_stddev: float, rng: np.random.Generator) -> np.ndarray:
     """A denser, sensor-like sampling of the surface: ``samples_per_triangle`` uniform random
     points in every triangle, Gaussian noise of ``noise_stddev`` [m] on the position (the
-    normal stays the exact interpolated one: ground truth), the label of the nearest corner.
+    normal and the material coordinates stay the exact interpolated ones: ground truth), the
+    label of the nearest corner.
     Reproducible for a given ``rng`` state."""
     triangles = np.asarray(triangles)
     if samples_per_triangle < 1:
@@ -140,7 +150,8 @@ def dense_surface_points(positions: np.ndarray, normals: np.ndarray, labels: np.
     if noise_stddev > 0:
         sampled = sampled + rng.normal(0.0, noise_stddev, size=sampled.shape)
     nearest = corners[np.arange(count), np.argmax(weights, axis=1)]
-    return sheet_points(sampled, sampled_normals, np.asarray(labels)[nearest])
+    sampled_material = np.einsum('nk,nkd->nd', weights, np.asarray(material)[corners])
+    return sheet_points(sampled, sampled_normals, np.asarray(labels)[nearest], sampled_material)
 
 
 def read_points(cloud: PointCloud2) -> np.ndarray:

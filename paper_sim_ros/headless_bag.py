@@ -47,7 +47,7 @@ class HeadlessBag:
         header = Header(frame_id=FRAME_ID, stamp=stamp)
         cloud = create_cloud(header, sheet_points(
             sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
-            simulator.damage_labels()))
+            simulator.damage_labels(), sheet.material))
         self._write('/paper/points', cloud, nanoseconds)
         slot = math.floor(simulator.time * self._camera_rate + 1e-9)
         if self._camera_rate > 0 and slot > self._camera_slot:

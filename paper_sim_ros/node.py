@@ -506,12 +506,13 @@ class PaperSimNode(Node):
         settings = self._settings
         rng = np.random.default_rng([settings.noise_seed, self.simulator.frame])
         if settings.dense_samples > 0:
-            return dense_surface_points(sheet.positions, normals, labels, sheet.triangles,
+            return dense_surface_points(sheet.positions, normals, labels, sheet.material,
+                                        sheet.triangles,
                                         settings.dense_samples, settings.noise_stddev, rng)
         positions = sheet.positions
         if settings.noise_stddev > 0:
             positions = positions + rng.normal(0.0, settings.noise_stddev, positions.shape)
-        return sheet_points(positions, normals, labels)
+        return sheet_points(positions, normals, labels, sheet.material)
 
     # -------------------------------------------------------------------------- services
     def _on_reset(self, request, response):

@@ -42,7 +42,8 @@ def random_points(count: int, seed: int = 0):
     normals = rng.normal(size=(count, 3))
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     labels = rng.integers(0, 3, count).astype(np.uint16)
-    return positions, normals, labels
+    material = rng.uniform(-0.1, 0.1, size=(count, 2))
+    return positions, normals, labels, material
 
 
 # ----------------------------------------------------------------------------- point cloud
@@ -50,20 +51,21 @@ def test_cloud_field_layout_is_exact():
     expected = [('x', 0, PointField.FLOAT32), ('y', 4, PointField.FLOAT32),
                 ('z', 8, PointField.FLOAT32), ('normal_x', 12, PointField.FLOAT32),
                 ('normal_y', 16, PointField.FLOAT32), ('normal_z', 20, PointField.FLOAT32),
-                ('label', 24, PointField.UINT16)]
+                ('label', 24, PointField.UINT16), ('u', 28, PointField.FLOAT32),
+                ('v', 32, PointField.FLOAT32)]
     actual = [(field.name, field.offset, field.datatype) for field in POINT_FIELDS]
     assert actual == expected
     assert all(field.count == 1 for field in POINT_FIELDS)
-    assert POINT_DTYPE.itemsize == 28
+    assert POINT_DTYPE.itemsize == 36
     cloud = create_cloud(HEADER, sheet_points(*random_points(10)))
-    assert (cloud.height, cloud.width, cloud.point_step, cloud.row_step) == (1, 10, 28, 280)
+    assert (cloud.height, cloud.width, cloud.point_step, cloud.row_step) == (1, 10, 36, 360)
     assert cloud.is_bigendian is False and cloud.is_dense is True
-    assert len(cloud.data) == 280
+    assert len(cloud.data) == 360
 
 
 def test_cloud_round_trip_through_serialisation():
-    positions, normals, labels = random_points(1000, seed=1)
-    cloud = create_cloud(HEADER, sheet_points(positions, normals, labels))
+    positions, normals, labels, material = random_points(1000, seed=1)
+    cloud = create_cloud(HEADER, sheet_points(positions, normals, labels, material))
     back = deserialize_message(serialize_message(cloud), PointCloud2)
     assert back == cloud
     parsed = parse_cloud(back)
@@ -73,32 +75,40 @@ def test_cloud_round_trip_through_serialisation():
         np.stack([parsed['normal_x'], parsed['normal_y'], parsed['normal_z']], 1),
         normals.astype(np.float32), err_msg='normals changed')
     np.testing.assert_array_equal(parsed['label'], labels, err_msg='labels changed')
+    np.testing.assert_array_equal(np.stack([parsed['u'], parsed['v']], 1),
+                                  material.astype(np.float32), err_msg='material changed')
     np.testing.assert_array_equal(read_points(back), parsed)
 
 
 def test_cloud_of_no_points():
     cloud = create_cloud(HEADER, sheet_points(np.zeros((0, 3)), np.zeros((0, 3)),
-                                              np.zeros(0, np.uint16)))
+                                              np.zeros(0, np.uint16), np.zeros((0, 2))))
     assert cloud.width == 0 and len(cloud.data) == 0
     assert read_points(cloud).shape == (0,)
 
 
 @pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
 def test_cloud_refuses_non_finite_input(bad):
-    positions, normals, labels = random_points(5)
+    positions, normals, labels, material = random_points(5)
     positions[2, 1] = bad
     with pytest.raises(ValueError, match='finite'):
-        sheet_points(positions, normals, labels)
+        sheet_points(positions, normals, labels, material)
     positions[2, 1] = 0.0
     normals[4, 0] = bad
     with pytest.raises(ValueError, match='finite'):
-        sheet_points(positions, normals, labels)
+        sheet_points(positions, normals, labels, material)
+    normals[4, 0] = 0.0
+    material[1, 1] = bad
+    with pytest.raises(ValueError, match='finite'):
+        sheet_points(positions, normals, labels, material)
 
 
 def test_cloud_refuses_mismatched_shapes():
-    positions, normals, labels = random_points(5)
+    positions, normals, labels, material = random_points(5)
     with pytest.raises(ValueError):
-        sheet_points(positions, normals[:4], labels)
+        sheet_points(positions, normals[:4], labels, material)
+    with pytest.raises(ValueError):
+        sheet_points(positions, normals, labels, material[:, :1])
     with pytest.raises(ValueError):
         create_cloud(HEADER, np.zeros((3, 3)))
 
@@ -117,8 +127,8 @@ def test_dense_sampling_is_seeded_on_the_surface_with_unit_normals():
     labels[10] = CREASED
 
     def sample(seed, noise=0.0):
-        return dense_surface_points(sheet.positions, normals, labels, sheet.triangles, 4, noise,
-                                    np.random.default_rng(seed))
+        return dense_surface_points(sheet.positions, normals, labels, sheet.material,
+                                    sheet.triangles, 4, noise, np.random.default_rng(seed))
     first, again, other = sample(7), sample(7), sample(8)
     assert first.shape == (4 * len(sheet.triangles),)
     assert first.tobytes() == again.tobytes(), 'same seed must give the same samples'
@@ -129,6 +139,9 @@ def test_dense_sampling_is_seeded_on_the_surface_with_unit_normals():
     length = np.sqrt(first['normal_x'] ** 2 + first['normal_y'] ** 2 + first['normal_z'] ** 2)
     np.testing.assert_allclose(length, 1.0, atol=1e-6)
     assert set(np.unique(first['label'])) == {UNDAMAGED, CREASED}
+    # a flat sheet's samples are at their material coordinates
+    np.testing.assert_allclose(first['u'], first['x'], atol=1e-6)
+    np.testing.assert_allclose(first['v'], first['y'], atol=1e-6)
     noisy = sample(7, noise=0.002)
     assert abs(float(np.std(noisy['z'])) - 0.002) < 0.0003, 'noise not of the asked size'
 
@@ -139,9 +152,11 @@ def test_dense_sampling_refuses_bad_options():
     labels = np.zeros(sheet.vertex_count, np.uint16)
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError):
-        dense_surface_points(sheet.positions, normals, labels, sheet.triangles, 0, 0.0, rng)
+        dense_surface_points(sheet.positions, normals, labels, sheet.material,
+                             sheet.triangles, 0, 0.0, rng)
     with pytest.raises(ValueError):
-        dense_surface_points(sheet.positions, normals, labels, sheet.triangles, 2, np.nan, rng)
+        dense_surface_points(sheet.positions, normals, labels, sheet.material,
+                             sheet.triangles, 2, np.nan, rng)
 
 
 # ---------------------------------------------------------------------------------- labels

@@ -170,7 +170,7 @@ def test_cloud_parses_back_to_the_vertices(sim):
     cloud = fresh_cloud(sim)
     assert [(f.name, f.offset, f.datatype) for f in cloud.fields] == [
         ('x', 0, 7), ('y', 4, 7), ('z', 8, 7), ('normal_x', 12, 7), ('normal_y', 16, 7),
-        ('normal_z', 20, 7), ('label', 24, 4)]
+        ('normal_z', 20, 7), ('label', 24, 4), ('u', 28, 7), ('v', 32, 7)]
     points = parse_cloud(cloud)
     assert cloud.width == VERTICES and cloud.height == 1 and points.shape == (VERTICES,)
     assert int(diagnostics(sim)['vertices']) == VERTICES
@@ -184,6 +184,9 @@ def test_cloud_parses_back_to_the_vertices(sim):
     assert np.ptp(positions[:, 0]) == pytest.approx(0.210, rel=0.01)
     assert np.ptp(positions[:, 1]) == pytest.approx(0.297, rel=0.01)
     np.testing.assert_array_equal(points['label'], 0, err_msg='an untouched sheet is undamaged')
+    # material coordinates: a flat sheet at rest is where its material is
+    np.testing.assert_allclose(points['u'], positions[:, 0], atol=1e-3)
+    np.testing.assert_allclose(points['v'], positions[:, 1], atol=1e-3)
 
 
 def test_markers_are_valid_for_rviz(sim):
