@@ -44,7 +44,7 @@ from visualization_msgs.msg import MarkerArray
 
 from .bag_recorder import BagRecorder, message_type_name
 from .core.appearance import PaperAppearance
-from .core.camera import render_simulator
+from .core.camera import render_simulator, with_depth_noise
 from .core.scenarios import pin_mask
 from .core.sheet import AUX, BEND, HINGE, Sheet
 from .core.simulator import Simulator
@@ -491,7 +491,9 @@ class PaperSimNode(Node):
         frame."""
         settings = self._settings
         camera = settings.camera
-        frame = render_simulator(camera, self.simulator, colors)
+        rng = np.random.default_rng([settings.noise_seed, self.simulator.frame, 1])
+        frame = with_depth_noise(render_simulator(camera, self.simulator, colors),
+                                 settings.camera_depth_noise, rng)
         header = Header(frame_id=camera.optical_frame, stamp=header.stamp)
         if self._bag is not None and not self._bag.counts.get('/tf_static'):
             self._bag.write_camera_transform(settings.frame_id, camera,

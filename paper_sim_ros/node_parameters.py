@@ -67,6 +67,7 @@ class NodeSettings:
     rerun_connect: str
     camera: CameraConfig
     camera_rate: float
+    camera_depth_noise: float
     bag_path: str
 
 
@@ -188,6 +189,9 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'where nothing is hit), color/image_raw (rgb8), camera_info and points (an '
                   'organised cloud with material u, v and damage label per pixel), in frame '
                   '<camera.name>_optical_frame.', (0.0, 1000.0)),
+    ParameterSpec('camera.depth_noise_stddev', 0.0, 'Gaussian noise on the camera\'s depth '
+                  '(and its cloud), like a depth sensor [m]; seeded by points.noise_seed and '
+                  'the frame number.', (0.0, 0.1)),
     ParameterSpec('camera.name', _CAMERA.name, 'Name of the camera: its topics and frame.',
                   read_only=True),
     ParameterSpec('camera.width', _CAMERA.width, 'Image width [pixels].', (1, 4096),
@@ -259,6 +263,14 @@ def _rate(values: Mapping[str, Any], name: str) -> float:
     if not (math.isfinite(rate) and rate >= 0):
         raise ValueError(f'{name} must be finite and >= 0, got {rate}')
     return rate
+
+
+def _depth_noise(value: Any) -> float:
+    stddev = float(value)
+    if not (math.isfinite(stddev) and stddev >= 0):
+        raise ValueError(f'camera.depth_noise_stddev: depth noise must be finite and >= 0 m, '
+                         f'got {stddev}')
+    return stddev
 
 
 def camera_from_values(values: Mapping[str, Any]) -> CameraConfig:
@@ -347,5 +359,6 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         rerun_connect=str(values['rerun_connect']),
         camera=camera_from_values(values),
         camera_rate=_rate(values, 'camera.rate'),
+        camera_depth_noise=_depth_noise(values['camera.depth_noise_stddev']),
         bag_path=str(values['bag_path']),
     )

@@ -2,6 +2,7 @@
 real serialised bytes: depth and colour images, CameraInfo that projects like the renderer,
 an organised cloud whose points lie on the sheet and carry its material coordinates."""
 import numpy as np
+import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import Header
@@ -9,7 +10,7 @@ from std_msgs.msg import Header
 from paper_sim_ros.core import SheetConfig, SimulationConfig, Simulator
 from paper_sim_ros.core.camera import (HIT_NOTHING, HIT_PAPER, HIT_PROBE, CameraConfig,
                                        camera_to_world, intrinsics, look_at, project, render,
-                                       render_simulator)
+                                       render_simulator, with_depth_noise)
 from paper_sim_ros.core.sheet import build_flat_sheet
 from paper_sim_ros.msg_adapters.camera import (PIXEL_DTYPE, camera_info, color_image,
                                                depth_image, organized_cloud)
@@ -146,3 +147,17 @@ def test_a_recording_holds_what_the_camera_saw(tmp_path):
     (translation,) = {tuple(np.ravel(value[0])) for value in
                       rows['/paper/cameras/oblique Transform3D:translation']}
     np.testing.assert_allclose(translation, EYE)
+
+
+def test_depth_noise_is_seeded_of_its_size_and_keeps_misses_nan():
+    _, frame, _ = scene()
+    noisy = with_depth_noise(frame, 0.002, np.random.default_rng(3))
+    again = with_depth_noise(frame, 0.002, np.random.default_rng(3))
+    hit = np.isfinite(frame.depth)
+    np.testing.assert_array_equal(np.isfinite(noisy.depth), hit)
+    np.testing.assert_array_equal(noisy.depth, again.depth)
+    assert abs(float(np.std(noisy.depth[hit] - frame.depth[hit])) - 0.002) < 1e-4
+    np.testing.assert_array_equal(noisy.rgb, frame.rgb)
+    assert with_depth_noise(frame, 0.0, np.random.default_rng(3)) is frame
+    with pytest.raises(ValueError, match='noise'):
+        with_depth_noise(frame, -1.0, np.random.default_rng(3))

@@ -100,6 +100,7 @@ def test_organised_cloud_shows_the_sheet_with_its_material_coordinates(camera_no
     ('camera.target', [0.0, 0.0, 0.5], 'must differ'),
     ('camera.position', [0.0, float('nan'), 0.5], 'finite'),
     ('camera.rate', -1.0, 'camera.rate'),
+    ('camera.depth_noise_stddev', float('nan'), 'depth noise'),
 ])
 def test_bad_camera_parameters_are_refused_with_a_reason(name, value, reason):
     values = declared_defaults()

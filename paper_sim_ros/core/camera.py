@@ -20,6 +20,7 @@ Rendering is two passes over flat arrays, both numba kernels:
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 import math
 
@@ -513,3 +514,15 @@ def render_simulator(config: CameraConfig, simulator, vertex_colors: np.ndarray)
     return render(config, sheet.positions, sheet.triangles, sheet.material,
                   simulator.damage_labels(), vertex_colors, probes.end, probes.radius,
                   probes.active, contact.ground_height if contact.ground_enabled else None)
+
+
+def with_depth_noise(frame: CameraFrame, stddev: float,
+                     rng: np.random.Generator) -> CameraFrame:
+    """``frame`` with Gaussian noise of ``stddev`` [m] on its depth where something is hit
+    (a depth sensor's; NaN stays NaN), reproducible for a given ``rng`` state."""
+    if not (math.isfinite(stddev) and stddev >= 0):
+        raise ValueError(f'depth noise must be finite and >= 0 m, got {stddev}')
+    if stddev == 0:
+        return frame
+    noise = rng.normal(0.0, stddev, frame.depth.shape).astype(np.float32)
+    return dataclasses.replace(frame, depth=frame.depth + noise)
