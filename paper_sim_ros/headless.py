@@ -38,9 +38,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--rrd', help='record the run to this Rerun .rrd file')
     parser.add_argument('--bag', metavar='DIR',
                         help='write what the node would publish (paper/points every frame, the '
-                             'default camera, /tf_static) to this new rosbag2 directory (MCAP)')
+                             "scenario's cameras, /tf_static) to this new rosbag2 directory "
+                             '(MCAP)')
     parser.add_argument('--camera-rate', type=float,
-                        help='rate of the default camera in --bag [Hz] (default 15; 0: off)')
+                        help="every camera's rate in --bag [Hz] (default: the scenario's; "
+                             '0: no camera)')
     parser.add_argument('--replay', metavar='FILE.rrd',
                         help='re-run a recorded session: its scenario, parameters and seed, '
                              'driven by its recorded probe inputs')

@@ -19,7 +19,7 @@ import math
 from typing import Any, Mapping
 
 from .core.appearance import FULL_DETAIL_LEVEL, AppearanceConfig
-from .core.camera import DEFAULT_POSITION, DEFAULT_TARGET, CameraConfig, look_at
+from .core.camera import DEFAULT_POSITION, DEFAULT_TARGET, CameraConfig, camera_looking_at
 from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
                           SolverConfig, from_mapping)
 from .core.materials import MATERIAL_PRESETS, material_preset
@@ -275,24 +275,14 @@ def _depth_noise(value: Any) -> float:
 
 def camera_from_values(values: Mapping[str, Any]) -> CameraConfig:
     """The camera.* parameters as a ``CameraConfig``; ValueError names what is wrong."""
-    name = str(values['camera.name'])
-    if not (name and name[0].isalpha() and name.replace('_', '').isalnum()):
-        raise ValueError(f'camera.name must be a letter then letters, digits or _, got {name!r}')
-    eye, target = (tuple(float(x) for x in values[f'camera.{key}'])
-                   for key in ('position', 'target'))
-    if len(eye) != 3 or len(target) != 3 or not all(map(math.isfinite, eye + target)):
-        raise ValueError(f'camera.position and camera.target must be 3 finite numbers, got '
-                         f'{list(eye)} and {list(target)}')
-    if math.dist(eye, target) < 1e-6:
-        raise ValueError('camera.target must differ from camera.position')
-    # image up is +z, or +y for a camera looking straight down (or up)
-    vertical = math.hypot(target[0] - eye[0], target[1] - eye[1]) \
-        < 1e-9 * math.dist(eye, target)
-    up = (0.0, 1.0, 0.0) if vertical else (0.0, 0.0, 1.0)
-    return CameraConfig(name=name, width=int(values['camera.width']),
-                        height=int(values['camera.height']),
-                        horizontal_fov=float(values['camera.horizontal_fov']), position=eye,
-                        orientation=look_at(eye, target, up))
+    try:
+        return camera_looking_at(str(values['camera.name']),
+                                 tuple(values['camera.position']),
+                                 tuple(values['camera.target']), int(values['camera.width']),
+                                 int(values['camera.height']),
+                                 float(values['camera.horizontal_fov']))
+    except ValueError as error:
+        raise ValueError(f'camera.*: {error}') from None
 
 
 def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:

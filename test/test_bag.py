@@ -140,3 +140,40 @@ def test_headless_camera_rate_needs_a_bag(tmp_path, capsys):
     assert headless_main(['--scenario', 'press', '--grid', '9', '--duration', '0.1',
                           '--camera-rate', '5']) == 2
     assert '--bag' in capsys.readouterr().err
+
+
+def test_a_scenario_file_sets_any_number_of_cameras(tmp_path, capsys):
+    scenario = tmp_path / 'two_cameras.yaml'
+    scenario.write_text(
+        'duration: 0.3\n'
+        'contact: {ground_enabled: true}\n'
+        'cameras:\n'
+        '  - {name: top, position: [0.0, 0.0, 0.5], width: 80, height: 60, rate: 10}\n'
+        '  - {name: side, position: [0.4, 0.0, 0.1], width: 64, height: 48, rate: 20,\n'
+        '     depth_noise_stddev: 0.001}\n')
+    bag = tmp_path / 'two'
+    assert headless_main(['--scenario', str(scenario), '--grid', '9', '--bag', str(bag)]) == 0
+    by_topic = read_with_both_readers(bag)
+    # 0.3 s: slots k / 10 s for k = 0..3, k / 20 s for k = 0..6
+    assert len(by_topic['/paper/top/camera_info']) == 4
+    assert len(by_topic['/paper/side/camera_info']) == 7
+    assert by_topic['/paper/side/depth/image_raw'][0][1].width == 64
+    top = by_topic['/paper/top/depth/image_raw'][-1][1]
+    depth = np.frombuffer(bytes(top.data), '<f4').reshape(60, 80)
+    assert depth[30, 40] == pytest.approx(0.5, abs=1e-3), 'straight down onto the sheet'
+    frames = {m.transforms[0].child_frame_id for _, m in by_topic['/tf_static']}
+    assert frames == {'top_optical_frame', 'side_optical_frame'}
+
+
+@pytest.mark.parametrize('cameras, reason', [
+    ('[{name: a, colour: red}]', 'unknown camera keys'),
+    ('[{name: a}, {name: a}]', 'distinct'),
+    ('[{name: a, rate: 0}]', 'rate'),
+    ('[{name: "no spaces"}]', 'letter'),
+    ('[{name: a, position: [0, 0, 0], target: [0, 0, 0]}]', 'differ'),
+])
+def test_bad_scenario_cameras_are_refused_with_a_reason(tmp_path, capsys, cameras, reason):
+    scenario = tmp_path / 'bad.yaml'
+    scenario.write_text(f'duration: 0.1\ncameras: {cameras}\n')
+    assert headless_main(['--scenario', str(scenario), '--grid', '9']) == 2
+    assert reason in capsys.readouterr().err

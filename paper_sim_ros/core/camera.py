@@ -499,10 +499,22 @@ DEFAULT_TARGET = (0.0, 0.0, 0.0)
 """What the default camera looks at [m]."""
 
 
-def default_camera(name: str = 'camera') -> CameraConfig:
-    """640 × 480, 1 rad wide, at DEFAULT_POSITION looking at DEFAULT_TARGET, image up +z."""
-    return CameraConfig(name=name, position=DEFAULT_POSITION,
-                        orientation=look_at(DEFAULT_POSITION, DEFAULT_TARGET))
+def camera_looking_at(name: str = 'camera', position=DEFAULT_POSITION,
+                      target=DEFAULT_TARGET, width: int = 640, height: int = 480,
+                      horizontal_fov: float = 1.0) -> CameraConfig:
+    """A camera at ``position`` whose optical axis goes through ``target`` (world, [m]),
+    image up towards +z, or +y when it looks straight down or up. ValueError names what is
+    wrong (a name that is not a letter then letters, digits or _ — it names topics and
+    frames —, non-finite or coinciding points, a bad size or field of view)."""
+    _require(isinstance(name, str) and name[:1].isalpha() and name.replace('_', '').isalnum(),
+             f'camera name must be a letter then letters, digits or _, got {name!r}')
+    eye = _finite_vector('position', position, 3)
+    aim = _finite_vector('target', target, 3)
+    _require(math.dist(eye, aim) > 1e-6, 'camera target must differ from its position')
+    vertical = math.hypot(aim[0] - eye[0], aim[1] - eye[1]) < 1e-9 * math.dist(eye, aim)
+    return CameraConfig(name=name, width=width, height=height, horizontal_fov=horizontal_fov,
+                        position=eye, orientation=look_at(
+                            eye, aim, (0.0, 1.0, 0.0) if vertical else (0.0, 0.0, 1.0)))
 
 
 def render_simulator(config: CameraConfig, simulator, vertex_colors: np.ndarray) -> CameraFrame:

@@ -21,6 +21,13 @@ scenarios, user files and recorded sessions all go through one loader
       - name: finger
         radius: 0.01         # m
         keyframes: [[0.0, 0.0, 0.0, 0.05], [1.0, 0.0, 0.0, 0.011]]   # [t, x, y, z]
+    cameras:                 # optional (absent: one default camera; []: none)
+      - name: top            # topics paper/top/..., frame top_optical_frame
+        position: [0.0, 0.0, 0.5]    # m
+        target: [0.0, 0.0, 0.0]      # the optical axis goes through it
+        width: 640           # pixels (also height, horizontal_fov [rad])
+        rate: 15.0           # Hz of simulated time
+        depth_noise_stddev: 0.0      # m, seeded by the scenario's seed
 
 Pin modes (``PIN_MODES``, ``pin_mask``): ``none`` pins nothing; ``short_edge`` clamps the
 edge at y = −height/2 (the lowest material y of the sheet: a short edge of the portrait A4
@@ -36,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from .appearance import AppearanceConfig
+from .camera import CameraConfig, camera_looking_at
 from .config import (ContactConfig, DamageConfig, SheetConfig, SimulationConfig, SolverConfig,
                      from_mapping)
 from .fractal import build_aged_sheet
@@ -45,7 +53,8 @@ from .sheet import Sheet, build_flat_sheet
 PIN_MODES = ('none', 'short_edge')
 """What a scenario (and the node) can pin: see ``pin_mask``."""
 
-SCENARIO_KEYS = ('name', 'description', 'duration', 'seed', 'pin', 'material', 'sheet',
+SCENARIO_KEYS = ('name', 'description', 'duration', 'seed', 'pin', 'material', 'cameras',
+                 'sheet',
                  'solver', 'contact', 'damage', 'appearance', 'crumple', 'aged', 'probes')
 """The keys a scenario mapping may have."""
 
@@ -181,6 +190,22 @@ class ProbeTrack:
 
 
 @dataclass(frozen=True)
+class ScenarioCamera:
+    """A virtual camera of a scenario (what a headless bag holds; core/camera.py)."""
+
+    config: CameraConfig
+    rate: float = 15.0
+    """Frames per second of simulated time [Hz]."""
+    depth_noise_stddev: float = 0.0
+    """Gaussian noise on its depth [m]."""
+
+
+DEFAULT_CAMERAS = (ScenarioCamera(camera_looking_at()),)
+"""A scenario without a ``cameras`` section has this one: above the table, oblique,
+640 × 480 at 15 Hz."""
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A validated scenario: what ``core.runner.build_simulator`` and ``run_scenario`` run."""
 
@@ -202,6 +227,8 @@ class Scenario:
     """The material preset applied (core/materials.py), or None."""
     appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
     """How the sheet looks (texture, shading); no effect on the physics."""
+    cameras: tuple[ScenarioCamera, ...] = DEFAULT_CAMERAS
+    """Its virtual cameras; no effect on the physics."""
 
     def initial_sheet(self) -> Sheet:
         """The sheet the scenario starts from: flat, or aged (SPEC §5)."""
@@ -244,6 +271,47 @@ def _probe_from_mapping(values: dict) -> ProbeTrack:
     if np.any(np.diff(keyframes[:, 0]) <= 0):
         raise ValueError(f'probe {name}: keyframe times must increase')
     return ProbeTrack(name=name, radius=radius, keyframes=keyframes)
+
+
+CAMERA_KEYS = ('name', 'position', 'target', 'width', 'height', 'horizontal_fov', 'rate',
+               'depth_noise_stddev')
+
+
+def _camera_from_mapping(values: dict) -> ScenarioCamera:
+    if not isinstance(values, dict):
+        raise ValueError(f'a camera must be a mapping, got {values!r}')
+    unknown = sorted(set(values) - set(CAMERA_KEYS))
+    if unknown:
+        raise ValueError(f'unknown camera keys: {", ".join(unknown)}; known: '
+                         f'{", ".join(CAMERA_KEYS)}')
+    default = DEFAULT_CAMERAS[0]
+    name = values.get('name', default.config.name)
+    config = camera_looking_at(
+        name, values.get('position', default.config.position),
+        values.get('target', (0.0, 0.0, 0.0)), values.get('width', default.config.width),
+        values.get('height', default.config.height),
+        values.get('horizontal_fov', default.config.horizontal_fov))
+    rate = float(values.get('rate', default.rate))
+    noise = float(values.get('depth_noise_stddev', 0.0))
+    if not (math.isfinite(rate) and 0 < rate <= 1000):
+        raise ValueError(f'camera {name}: rate must be in (0, 1000] Hz, got {rate}')
+    if not (math.isfinite(noise) and 0 <= noise <= 0.1):
+        raise ValueError(f'camera {name}: depth_noise_stddev must be in [0, 0.1] m, '
+                         f'got {noise}')
+    return ScenarioCamera(config, rate, noise)
+
+
+def _cameras_from_mapping(mapping: dict) -> tuple[ScenarioCamera, ...]:
+    if 'cameras' not in mapping:
+        return DEFAULT_CAMERAS
+    items = mapping['cameras'] or []
+    if not isinstance(items, list):
+        raise ValueError(f'cameras must be a list, got {items!r}')
+    cameras = tuple(_camera_from_mapping(item) for item in items)
+    names = [camera.config.name for camera in cameras]
+    if len(set(names)) != len(names):
+        raise ValueError(f'camera names must be distinct, got {names}')
+    return cameras
 
 
 def _section(mapping: dict, key: str) -> dict:
@@ -293,12 +361,13 @@ def scenario_from_mapping(mapping: dict, name: str = 'custom') -> Scenario:
     if not (math.isfinite(amplitude) and 0 <= amplitude <= 0.1):
         raise ValueError(f'aged amplitude must be in [0, 0.1] m, got {amplitude}')
     probes = tuple(_probe_from_mapping(p) for p in mapping.get('probes') or [])
+    cameras = _cameras_from_mapping(mapping)
     return Scenario(name=str(mapping.get('name', name)),
                     description=str(mapping.get('description', '')),
                     duration=duration, pin=pin, config=config, probes=probes,
                     mapping=copy.deepcopy(mapping), crumple=crumple,
                     aged_amplitude=amplitude, aged_levels=aged.get('levels'),
-                    material=material, appearance=appearance)
+                    material=material, appearance=appearance, cameras=cameras)
 
 
 def builtin_mapping(name: str) -> dict:
