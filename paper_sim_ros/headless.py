@@ -8,7 +8,9 @@ Exit status 0 on success, 2 with a one-line reason on bad input, 130 when interr
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 import json
+import math
 import os
 import signal
 import sys
@@ -16,6 +18,7 @@ from typing import Callable
 
 from .core import (BUILTIN_SCENARIOS, Simulator, build_simulator, check_metrics_path,
                    load_scenario, run_scenario, write_metrics)
+from .core.camera_rig import CameraRig
 from .rerun_logger import RerunRecorder, check_writable_rrd
 from .rerun_replay import replay
 from .warmup import warm_up
@@ -41,24 +44,36 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                              "scenario's cameras, /tf_static) to this new rosbag2 directory "
                              '(MCAP)')
     parser.add_argument('--camera-rate', type=float,
-                        help="every camera's rate in --bag [Hz] (default: the scenario's; "
-                             '0: no camera)')
+                        help="every camera's rate [Hz]: in --bag (default: the scenario's; 0: "
+                             'no camera) and in --rrd (default: no camera there, as images '
+                             'would dwarf the rest of a recording)')
     parser.add_argument('--replay', metavar='FILE.rrd',
                         help='re-run a recorded session: its scenario, parameters and seed, '
                              'driven by its recorded probe inputs')
     return parser.parse_args(argv)
 
 
-def _recording_callback(recorder: RerunRecorder,
-                        dt: float) -> Callable[[Simulator, float], None]:
-    def log(simulator: Simulator, step_seconds: float) -> None:
+def _recording_callback(recorder: RerunRecorder, dt: float,
+                        with_cameras: bool) -> Callable[[Simulator, float, list], None]:
+    def log(simulator: Simulator, step_seconds: float, camera_frames: list) -> None:
         recorder.log_frame(simulator.time, simulator, scalars={
             'step_time': step_seconds,
             'real_time_factor': dt / step_seconds if step_seconds > 0 else 0.0,
             'energy': simulator.energy(),
             'max_strain': simulator.max_strain(),
         })
+        for camera, frame in camera_frames if with_cameras else ():
+            recorder.log_camera(simulator.time, simulator, camera.config, frame)
     return log
+
+
+def _scenario_cameras(scenario, camera_rate: float | None) -> tuple:
+    """The scenario's cameras, each at ``camera_rate`` when given."""
+    if camera_rate is None:
+        return scenario.cameras
+    if not (math.isfinite(camera_rate) and camera_rate >= 0):
+        raise ValueError(f'--camera-rate must be finite and >= 0 Hz, got {camera_rate}')
+    return tuple(replace(camera, rate=camera_rate) for camera in scenario.cameras)
 
 
 def _raise_keyboard_interrupt(signum, frame) -> None:
@@ -97,19 +112,28 @@ def main(argv: list[str] | None = None) -> int:
                                  damage_enabled=False if args.no_damage else None)
         simulator = build_simulator(scenario)
         check_metrics_path(args.metrics_json)
-        if args.camera_rate is not None and not args.bag:
-            raise ValueError('--camera-rate is the rate of the camera in --bag; give --bag DIR')
-        outputs: list[Callable[[Simulator, float], None]] = []
+        if args.camera_rate is not None and not (args.bag or args.rrd):
+            raise ValueError('--camera-rate is the rate of the cameras in --bag or --rrd; '
+                             'give one')
+        recorded_cameras = args.bag or args.camera_rate is not None
+        rig = CameraRig(_scenario_cameras(scenario, args.camera_rate) if recorded_cameras
+                        else (), scenario.appearance, simulator, scenario.config.seed)
+        outputs: list[Callable[[Simulator, float, list], None]] = []
         if args.rrd:
+            with_cameras = args.camera_rate is not None
             recorder = RerunRecorder('paper_sim_headless', path=args.rrd,
                                      recording_info={'scenario': scenario.mapping},
-                                     appearance=scenario.appearance)
-            outputs.append(_recording_callback(recorder, scenario.config.solver.dt))
+                                     appearance=scenario.appearance,
+                                     cameras=tuple(camera.config.name for camera in rig.cameras)
+                                     if with_cameras else ())
+            outputs.append(_recording_callback(recorder, scenario.config.solver.dt,
+                                               with_cameras))
         if args.bag:
             # only a bag needs the ROS message packages
             from .headless_bag import HeadlessBag
-            bag = HeadlessBag(args.bag, scenario, simulator, args.camera_rate)
-            outputs.append(lambda simulator, step_seconds: bag.on_frame(simulator))
+            bag = HeadlessBag(args.bag, rig.cameras)
+            outputs.append(lambda simulator, step_seconds, frames: bag.on_frame(simulator,
+                                                                                frames))
     except (ValueError, OSError) as error:
         _close(recorder, bag)
         return _error(error)
@@ -120,14 +144,22 @@ def main(argv: list[str] | None = None) -> int:
         warm_up()
         metrics = run_scenario(
             scenario, simulator=simulator,
-            on_frame=lambda simulator, seconds: [output(simulator, seconds)
-                                                 for output in outputs])
+            on_frame=lambda simulator, seconds: _each_output(outputs, simulator, seconds,
+                                                             rig))
     except KeyboardInterrupt:
         return _interrupted()
     finally:
         _close(recorder, bag)
     emit_metrics(metrics, args.metrics_json)
     return 0
+
+
+def _each_output(outputs: list, simulator: Simulator, step_seconds: float,
+                 rig: CameraRig) -> None:
+    if outputs:
+        frames = rig.due_frames(simulator)  # each camera rendered once for all outputs
+        for output in outputs:
+            output(simulator, step_seconds, frames)
 
 
 def _close(*outputs) -> None:

@@ -6,18 +6,12 @@ Kept apart from ``headless`` so that a run without ``--bag`` needs no ROS messag
 """
 from __future__ import annotations
 
-from dataclasses import replace
-import math
-
-import numpy as np
-
 from builtin_interfaces.msg import Time
 from std_msgs.msg import Header
 
 from .bag_recorder import BagRecorder, message_type_name
-from .core.appearance import PaperAppearance
-from .core.camera import render_simulator, with_depth_noise
-from .core.scenarios import Scenario
+from .core.camera import CameraFrame
+from .core.scenarios import ScenarioCamera
 from .core.simulator import Simulator
 from .core.topology import vertex_normals
 from .msg_adapters.camera import camera_messages
@@ -29,23 +23,16 @@ FRAME_ID = 'world'
 class HeadlessBag:
     """Writes one run into a bag; ``on_frame`` after every frame, ``close`` at the end."""
 
-    def __init__(self, path: str, scenario: Scenario, simulator: Simulator,
-                 camera_rate: float | None) -> None:
-        """``camera_rate``: every camera's rate [Hz] (0: no camera), instead of the
-        scenario's own (None)."""
-        if camera_rate is not None and not (math.isfinite(camera_rate) and camera_rate >= 0):
-            raise ValueError(f'--camera-rate must be finite and >= 0 Hz, got {camera_rate}')
-        self._cameras = [camera if camera_rate is None else replace(camera, rate=camera_rate)
-                         for camera in scenario.cameras]
-        self._cameras = [camera for camera in self._cameras if camera.rate > 0]
-        self._slots = [-1] * len(self._cameras)
-        self._seed = scenario.config.seed
+    def __init__(self, path: str, cameras: tuple[ScenarioCamera, ...]) -> None:
+        """``cameras``: those whose frames ``on_frame`` will be given (their poses go on
+        /tf_static now)."""
         self._bag = BagRecorder(path)
-        self._appearance = PaperAppearance(scenario.appearance, simulator.sheet)
-        for camera in self._cameras:
+        for camera in cameras:
             self._bag.write_camera_transform(FRAME_ID, camera.config, 0)
 
-    def on_frame(self, simulator: Simulator) -> None:
+    def on_frame(self, simulator: Simulator,
+                 camera_frames: list[tuple[ScenarioCamera, CameraFrame]]) -> None:
+        """The sheet's cloud, and each camera frame due now (``CameraRig.due_frames``)."""
         sheet = simulator.sheet
         nanoseconds = int(round(simulator.time * 1e9))
         stamp = Time(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
@@ -54,17 +41,7 @@ class HeadlessBag:
             sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
             simulator.damage_labels(), sheet.material))
         self._write('/paper/points', cloud, nanoseconds)
-        colors = None
-        for index, camera in enumerate(self._cameras):
-            slot = math.floor(simulator.time * camera.rate + 1e-9)
-            if slot <= self._slots[index]:
-                continue
-            self._slots[index] = slot
-            if colors is None:
-                colors = self._appearance.vertex_colors(sheet)
-            rng = np.random.default_rng([self._seed, simulator.frame, index])
-            frame = with_depth_noise(render_simulator(camera.config, simulator, colors),
-                                     camera.depth_noise_stddev, rng)
+        for camera, frame in camera_frames:
             camera_header = Header(frame_id=camera.config.optical_frame, stamp=stamp)
             topic = f'/paper/{camera.config.name}'
             for suffix, message in zip(('depth/image_raw', 'color/image_raw', 'camera_info',

@@ -54,8 +54,8 @@ from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
 from .node_runner import run_node
-from .node_parameters import (PARAMETER_SPECS, PARAMETERS, NodeSettings, declared_defaults,
-                              settings_from_values)
+from .node_parameters import (PARAMETER_SPECS, NodeSettings, declared_defaults,
+                              parameter_table, settings_from_values)
 from .rerun_logger import RerunRecorder
 
 NODE_NAME = 'paper_sim'
@@ -158,16 +158,20 @@ class PaperSimNode(Node):
         self._recorder = None
         self._bag = None
         # the material first: its preset gives the other parameters their defaults
+        # and the camera names: each has its own parameters
         material = self.declare_parameter('material', PARAMETER_SPECS['material'].default,
                                           _descriptor(PARAMETER_SPECS['material'])).value
+        cameras = self.declare_parameter('cameras', PARAMETER_SPECS['cameras'].default,
+                                         _descriptor(PARAMETER_SPECS['cameras'])).value
         try:
-            defaults = declared_defaults(material)
+            defaults = declared_defaults(material, cameras)
         except ValueError as error:
             raise StartupError(f'invalid parameters: {error}') from None
-        for spec in PARAMETERS:
-            if spec.name != 'material':
+        self._specs = {spec.name: spec for spec in parameter_table(cameras)}
+        for spec in self._specs.values():
+            if spec.name not in ('material', 'cameras'):
                 self.declare_parameter(spec.name, defaults[spec.name], _descriptor(spec))
-        self._values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+        self._values = {name: self.get_parameter(name).value for name in self._specs}
         try:
             self._settings = settings_from_values(self._values)
         except ValueError as error:
@@ -193,7 +197,8 @@ class PaperSimNode(Node):
             recent_strains=deque(maxlen=int(round(self._settings.physics_rate))))
         self._points_schedule = Schedule()
         self._markers_schedule = Schedule()
-        self._camera_schedule = Schedule()
+        self._camera_schedules = [Schedule() for _ in settings.cameras]
+        self._cameras_on_tf_static: set[str] = set()
         self._origin_ns: int | None = None
         self._delete_all_pending = True
         self._crumple_calls = 0
@@ -201,12 +206,12 @@ class PaperSimNode(Node):
         self._points_pub = self.create_publisher(PointCloud2, 'paper/points', OUTPUT_QOS)
         self._markers_pub = self.create_publisher(MarkerArray, 'paper/markers', OUTPUT_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        camera = f'paper/{settings.camera.name}'
-        self._camera_pubs = (
-            self.create_publisher(Image, f'{camera}/depth/image_raw', OUTPUT_QOS),
-            self.create_publisher(Image, f'{camera}/color/image_raw', OUTPUT_QOS),
-            self.create_publisher(CameraInfo, f'{camera}/camera_info', OUTPUT_QOS),
-            self.create_publisher(PointCloud2, f'{camera}/points', OUTPUT_QOS))
+        self._camera_pubs = [
+            (self.create_publisher(Image, f'{prefix}/depth/image_raw', OUTPUT_QOS),
+             self.create_publisher(Image, f'{prefix}/color/image_raw', OUTPUT_QOS),
+             self.create_publisher(CameraInfo, f'{prefix}/camera_info', OUTPUT_QOS),
+             self.create_publisher(PointCloud2, f'{prefix}/points', OUTPUT_QOS))
+            for prefix in (f'paper/{camera.config.name}' for camera in settings.cameras)]
         self._probes = [ProbeInput(topic) for topic in settings.probe_topics]
         self._pose_subscriptions = [
             self.create_subscription(PoseStamped, topic,
@@ -251,8 +256,9 @@ class PaperSimNode(Node):
                                  settings.rerun_connect or None,
                                  {'node': self.get_fully_qualified_name(),
                                   'parameters': dict(self._values)},
-                                 cameras=(settings.camera.name,) if settings.camera_rate > 0
-                                 else ())
+                                 cameras=tuple(camera.config.name
+                                               for camera in settings.cameras
+                                               if camera.rate > 0))
         except (OSError, ValueError, RuntimeError) as error:
             raise StartupError(f'cannot record to Rerun: {error}') from None
 
@@ -271,7 +277,7 @@ class PaperSimNode(Node):
         """Refuse a change that would make the settings invalid; nothing is applied here."""
         values = dict(self._values)
         for parameter in parameters:
-            if parameter.name in PARAMETER_SPECS:
+            if parameter.name in self._specs:
                 values[parameter.name] = parameter.value
         try:
             settings_from_values(values)
@@ -283,11 +289,11 @@ class PaperSimNode(Node):
     def _apply_parameters(self, parameters) -> None:
         """Apply accepted changes (only run-time ones get here: the rest are read-only)."""
         changed = {parameter.name for parameter in parameters
-                   if parameter.name in PARAMETER_SPECS}
+                   if parameter.name in self._specs}
         if not changed:
             return
         for parameter in parameters:
-            if parameter.name in PARAMETER_SPECS:
+            if parameter.name in self._specs:
                 self._values[parameter.name] = parameter.value
         previous = self._settings
         self._settings = settings_from_values(self._values)
@@ -301,9 +307,10 @@ class PaperSimNode(Node):
         if self._settings.markers_rate != previous.markers_rate:
             self._markers_schedule.next_time = min(self._markers_schedule.next_time,
                                                    self.simulator.time)
-        if self._settings.camera_rate != previous.camera_rate:
-            self._camera_schedule.next_time = min(self._camera_schedule.next_time,
-                                                  self.simulator.time)
+        for schedule, camera, before in zip(self._camera_schedules, self._settings.cameras,
+                                            previous.cameras):
+            if camera.rate != before.rate:
+                schedule.next_time = min(schedule.next_time, self.simulator.time)
         if self._settings.diagnostics_rate != previous.diagnostics_rate:
             self._start_diagnostics_timer()
         self.get_logger().info(f'parameters changed: {", ".join(sorted(changed))}')
@@ -442,9 +449,11 @@ class PaperSimNode(Node):
         sim_time = simulator.time
         want_points = self._points_schedule.take(sim_time, settings.publish_rate)
         want_markers = self._markers_schedule.take(sim_time, settings.markers_rate)
-        want_camera = self._camera_schedule.take(sim_time, settings.camera_rate)
+        due_cameras = [index for index, (camera, schedule)
+                       in enumerate(zip(settings.cameras, self._camera_schedules))
+                       if schedule.take(sim_time, camera.rate)]
         recorder = self._recorder
-        if not (want_points or want_markers or want_camera):
+        if not (want_points or want_markers or due_cameras):
             if recorder is not None:
                 recorder.log_inputs(self._recording_time(), simulator)
             return
@@ -462,10 +471,10 @@ class PaperSimNode(Node):
         if want_points:
             self._send(self._points_pub, create_cloud(header, self._cloud_points(
                 sheet, normals, labels)), header.stamp)
-        if want_markers or want_camera or recorder is not None:
+        if want_markers or due_cameras or recorder is not None:
             colors = self._appearance.vertex_colors(sheet)
-        if want_camera:
-            self._publish_camera(header, colors)
+        for index in due_cameras:
+            self._publish_camera(index, header, colors)
         if want_markers:
             centers, radii, active = (simulator.probes.end, simulator.probes.radius,
                                       simulator.probes.active)
@@ -486,23 +495,25 @@ class PaperSimNode(Node):
         self._stats.window_publish_seconds += time.perf_counter() - started
         self._stats.window_publishes += 1
 
-    def _publish_camera(self, header: Header, colors: np.ndarray) -> None:
-        """What the virtual camera sees, its four messages under one header in its optical
-        frame."""
+    def _publish_camera(self, index: int, header: Header, colors: np.ndarray) -> None:
+        """What the ``index``-th virtual camera sees, its four messages under one header in
+        its optical frame."""
         settings = self._settings
-        camera = settings.camera
-        rng = np.random.default_rng([settings.noise_seed, self.simulator.frame, 1])
-        frame = with_depth_noise(render_simulator(camera, self.simulator, colors),
-                                 settings.camera_depth_noise, rng)
-        header = Header(frame_id=camera.optical_frame, stamp=header.stamp)
-        if self._bag is not None and not self._bag.counts.get('/tf_static'):
-            self._bag.write_camera_transform(settings.frame_id, camera,
+        camera = settings.cameras[index]
+        config = camera.config
+        rng = np.random.default_rng([settings.noise_seed, self.simulator.frame, 1, index])
+        frame = with_depth_noise(render_simulator(config, self.simulator, colors),
+                                 camera.depth_noise_stddev, rng)
+        header = Header(frame_id=config.optical_frame, stamp=header.stamp)
+        if self._bag is not None and config.name not in self._cameras_on_tf_static:
+            self._bag.write_camera_transform(settings.frame_id, config,
                                              Time.from_msg(header.stamp).nanoseconds)
-        for publisher, message in zip(self._camera_pubs,
-                                      camera_messages(header, camera, frame)):
+            self._cameras_on_tf_static.add(config.name)
+        for publisher, message in zip(self._camera_pubs[index],
+                                      camera_messages(header, config, frame)):
             self._send(publisher, message, header.stamp)
         if self._recorder is not None:
-            self._recorder.log_camera(self._recording_time(), self.simulator, camera, frame)
+            self._recorder.log_camera(self._recording_time(), self.simulator, config, frame)
 
     def _cloud_points(self, sheet: Sheet, normals: np.ndarray, labels: np.ndarray):
         settings = self._settings

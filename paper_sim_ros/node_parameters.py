@@ -23,7 +23,7 @@ from .core.camera import DEFAULT_POSITION, DEFAULT_TARGET, CameraConfig, camera_
 from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
                           SolverConfig, from_mapping)
 from .core.materials import MATERIAL_PRESETS, material_preset
-from .core.scenarios import PIN_MODES
+from .core.scenarios import PIN_MODES, ScenarioCamera
 
 
 @dataclass(frozen=True)
@@ -65,9 +65,8 @@ class NodeSettings:
     bend_springs: bool
     rerun_path: str
     rerun_connect: str
-    camera: CameraConfig
-    camera_rate: float
-    camera_depth_noise: float
+    cameras: tuple[ScenarioCamera, ...]
+    """The virtual cameras, in the order of the ``cameras`` parameter; rate 0: off."""
     bag_path: str
 
 
@@ -77,8 +76,9 @@ _CONTACT = ContactConfig()
 _DAMAGE = DamageConfig()
 _APPEARANCE = AppearanceConfig()
 _CAMERA = CameraConfig()
+DEFAULT_CAMERA_NAME = _CAMERA.name
 
-PARAMETERS: tuple[ParameterSpec, ...] = (
+GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('frame_id', 'world', 'Frame of the sheet: of every published header, and the '
                   'only frame accepted for probe poses.', read_only=True),
     ParameterSpec('physics_rate', 60.0, 'Simulation frames per second of simulated time; one '
@@ -184,26 +184,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('bag_path', '', "Record every published message to this rosbag2 directory "
                   "(MCAP storage; it must not exist yet), with the camera's pose on "
                   "/tf_static; '' : off.", read_only=True),
-    ParameterSpec('camera.rate', 0.0, 'Rate of the virtual camera in simulated time [Hz]; '
-                  '0: off. It publishes paper/<camera.name>/depth/image_raw (32FC1 [m], NaN '
-                  'where nothing is hit), color/image_raw (rgb8), camera_info and points (an '
-                  'organised cloud with material u, v and damage label per pixel), in frame '
-                  '<camera.name>_optical_frame.', (0.0, 1000.0)),
-    ParameterSpec('camera.depth_noise_stddev', 0.0, 'Gaussian noise on the camera\'s depth '
-                  '(and its cloud), like a depth sensor [m]; seeded by points.noise_seed and '
-                  'the frame number.', (0.0, 0.1)),
-    ParameterSpec('camera.name', _CAMERA.name, 'Name of the camera: its topics and frame.',
-                  read_only=True),
-    ParameterSpec('camera.width', _CAMERA.width, 'Image width [pixels].', (1, 4096),
-                  read_only=True),
-    ParameterSpec('camera.height', _CAMERA.height, 'Image height [pixels].', (1, 4096),
-                  read_only=True),
-    ParameterSpec('camera.horizontal_fov', _CAMERA.horizontal_fov, 'Horizontal field of '
-                  'view [rad].', (0.01, 3.1), read_only=True),
-    ParameterSpec('camera.position', list(DEFAULT_POSITION), 'Optical centre in frame_id: x y z '
-                  '[m] (default: above the table, oblique).', read_only=True),
-    ParameterSpec('camera.target', list(DEFAULT_TARGET), 'Point the optical axis goes through, in '
-                  'frame_id: x y z [m]; image up is towards +z (+y looking straight down).',
+    ParameterSpec('cameras', [DEFAULT_CAMERA_NAME], 'Names of the virtual cameras; each name N '
+                  'has the parameters N.rate, N.width, ... (as camera.* below) and publishes '
+                  'paper/N/depth/image_raw (32FC1 [m], NaN where nothing is hit), '
+                  'color/image_raw (rgb8), camera_info and points (an organised cloud with '
+                  'material u, v and damage label per pixel), in frame N_optical_frame.',
                   read_only=True),
     ParameterSpec('damage.enabled', _DAMAGE.enabled, 'Breaks and folds happen (SPEC section '
                   '4).', read_only=True),
@@ -235,16 +220,68 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
                   'longer side of the procedural texture.', (16, 2048), read_only=True),
 )
 
+
+def camera_parameters(name: str) -> tuple[ParameterSpec, ...]:
+    """The parameters of the camera ``name`` (one entry of ``cameras``)."""
+    return (
+        ParameterSpec(f'{name}.rate', 0.0, 'Frames per second in simulated time [Hz]; 0: off.',
+                      (0.0, 1000.0)),
+        ParameterSpec(f'{name}.depth_noise_stddev', 0.0, 'Gaussian noise on the depth (and '
+                      'the cloud), like a depth sensor [m]; seeded by points.noise_seed and '
+                      'the frame number.', (0.0, 0.1)),
+        ParameterSpec(f'{name}.width', _CAMERA.width, 'Image width [pixels].', (1, 4096),
+                      read_only=True),
+        ParameterSpec(f'{name}.height', _CAMERA.height, 'Image height [pixels].', (1, 4096),
+                      read_only=True),
+        ParameterSpec(f'{name}.horizontal_fov', _CAMERA.horizontal_fov, 'Horizontal field '
+                      'of view [rad]; gives fx when fx is 0.', (0.01, 3.1), read_only=True),
+        ParameterSpec(f'{name}.fx', 0.0, 'Focal length along x [pixels]; 0: from '
+                      'horizontal_fov.', (0.0, 1.0e6), read_only=True),
+        ParameterSpec(f'{name}.fy', 0.0, 'Focal length along y [pixels]; 0: fx (square '
+                      'pixels).', (0.0, 1.0e6), read_only=True),
+        ParameterSpec(f'{name}.cx', 0.0, 'Principal point x [pixels]; 0: the image centre, '
+                      '(width - 1) / 2.', (0.0, 1.0e5), read_only=True),
+        ParameterSpec(f'{name}.cy', 0.0, 'Principal point y [pixels]; 0: the image centre, '
+                      '(height - 1) / 2.', (0.0, 1.0e5), read_only=True),
+        ParameterSpec(f'{name}.position', list(DEFAULT_POSITION), 'Optical centre in frame_id: '
+                      'x y z [m] (default: above the table, oblique).', read_only=True),
+        ParameterSpec(f'{name}.target', list(DEFAULT_TARGET), 'Point the optical axis goes '
+                      'through, in frame_id: x y z [m]; image up is towards +z (+y looking '
+                      'straight down).', read_only=True),
+    )
+
+
+def parameter_table(cameras=(DEFAULT_CAMERA_NAME,)) -> tuple[ParameterSpec, ...]:
+    """Every parameter of a node whose ``cameras`` parameter lists ``cameras``. ValueError
+    for a camera name that cannot name topics and frames or that would shadow another
+    parameter."""
+    names = [str(name) for name in cameras]
+    if len(set(names)) != len(names):
+        raise ValueError(f'cameras: names must be distinct, got {names}')
+    taken = {spec.name.split('.')[0] for spec in GLOBAL_PARAMETERS}
+    for name in names:
+        if not (name[:1].isalpha() and name.replace('_', '').isalnum()):
+            raise ValueError(f'cameras: a name must be a letter then letters, digits or _, '
+                             f'got {name!r}')
+        if name in taken:
+            raise ValueError(f'cameras: {name!r} is taken by the parameters {name}.*')
+    return GLOBAL_PARAMETERS + sum((camera_parameters(name) for name in names), ())
+
+
+PARAMETERS = parameter_table()
+"""The table of a node with the default camera list."""
 PARAMETER_NAMES = tuple(spec.name for spec in PARAMETERS)
 PARAMETER_SPECS = {spec.name: spec for spec in PARAMETERS}
 
 
-def declared_defaults(material: str = '') -> dict[str, Any]:
-    """The default every parameter is declared with when the node starts with ``material``:
-    the preset's value for each ``sheet.*`` and ``damage.*`` parameter it names (as the type
-    of the parameter), the table's for the others. ``ValueError`` for an unknown material."""
-    defaults = {spec.name: spec.default for spec in PARAMETERS}
+def declared_defaults(material: str = '', cameras=(DEFAULT_CAMERA_NAME,)) -> dict[str, Any]:
+    """The default every parameter is declared with when the node starts with ``material``
+    and ``cameras``: the preset's value for each ``sheet.*`` and ``damage.*`` parameter it
+    names (as the type of the parameter), the table's for the others. ``ValueError`` for an
+    unknown material or a bad camera name."""
+    defaults = {spec.name: spec.default for spec in parameter_table(cameras)}
     defaults['material'] = material
+    defaults['cameras'] = list(cameras)
     if material:
         for section, values in material_preset(material).items():
             for field, value in values.items():
@@ -265,29 +302,33 @@ def _rate(values: Mapping[str, Any], name: str) -> float:
     return rate
 
 
-def _depth_noise(value: Any) -> float:
-    stddev = float(value)
-    if not (math.isfinite(stddev) and stddev >= 0):
-        raise ValueError(f'camera.depth_noise_stddev: depth noise must be finite and >= 0 m, '
-                         f'got {stddev}')
-    return stddev
+def camera_from_values(values: Mapping[str, Any], name: str) -> ScenarioCamera:
+    """The ``name.*`` parameters as a camera; ValueError names what is wrong."""
+    def intrinsic(field: str) -> float | None:
+        value = float(values[f'{name}.{field}'])
+        return value if value != 0.0 else None  # 0: derived (see camera_parameters)
 
-
-def camera_from_values(values: Mapping[str, Any]) -> CameraConfig:
-    """The camera.* parameters as a ``CameraConfig``; ValueError names what is wrong."""
+    rate = _rate(values, f'{name}.rate')
+    noise = float(values[f'{name}.depth_noise_stddev'])
+    if not (math.isfinite(noise) and noise >= 0):
+        raise ValueError(f'{name}.depth_noise_stddev: depth noise must be finite and >= 0 m, '
+                         f'got {noise}')
     try:
-        return camera_looking_at(str(values['camera.name']),
-                                 tuple(values['camera.position']),
-                                 tuple(values['camera.target']), int(values['camera.width']),
-                                 int(values['camera.height']),
-                                 float(values['camera.horizontal_fov']))
+        config = camera_looking_at(name, tuple(values[f'{name}.position']),
+                                   tuple(values[f'{name}.target']),
+                                   int(values[f'{name}.width']), int(values[f'{name}.height']),
+                                   float(values[f'{name}.horizontal_fov']),
+                                   fx=intrinsic('fx'), fy=intrinsic('fy'),
+                                   cx=intrinsic('cx'), cy=intrinsic('cy'))
     except ValueError as error:
-        raise ValueError(f'camera.*: {error}') from None
+        raise ValueError(f'{name}.*: {error}') from None
+    return ScenarioCamera(config, rate, noise)
 
 
 def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
     """Validate a complete set of parameter values; ValueError names what is wrong."""
-    missing = [name for name in PARAMETER_NAMES if name not in values]
+    camera_names = tuple(str(name) for name in values.get('cameras', ()))
+    missing = [spec.name for spec in parameter_table(camera_names) if spec.name not in values]
     if missing:
         raise ValueError(f'missing parameters: {", ".join(missing)}')
     frame_id = str(values['frame_id']).strip()
@@ -347,8 +388,6 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         bend_springs=bool(values['markers.bend_springs']),
         rerun_path=str(values['rerun_path']),
         rerun_connect=str(values['rerun_connect']),
-        camera=camera_from_values(values),
-        camera_rate=_rate(values, 'camera.rate'),
-        camera_depth_noise=_depth_noise(values['camera.depth_noise_stddev']),
+        cameras=tuple(camera_from_values(values, name) for name in camera_names),
         bag_path=str(values['bag_path']),
     )

@@ -40,8 +40,8 @@ def test_a_session_stopped_by_a_signal_leaves_a_complete_bag(tmp_path, signal_nu
     domain = new_domain_id()
     process = start_node(tmp_path, {
         'sheet.nx': 17, 'sheet.ny': 17, 'publish_rate': 10.0, 'markers_rate': 2.0,
-        'diagnostics_rate': 2.0, 'camera.rate': 5.0, 'camera.name': 'eye',
-        'camera.width': 64, 'camera.height': 48, 'camera.position': EYE,
+        'diagnostics_rate': 2.0, 'cameras': ['eye'], 'eye.rate': 5.0,
+        'eye.width': 64, 'eye.height': 48, 'eye.position': EYE,
         'bag_path': str(bag)}, domain_id=domain)
     client = RosClient(domain)
     try:
@@ -136,10 +136,10 @@ def test_headless_refuses_an_existing_bag_directory(tmp_path, capsys):
     assert 'exists' in capsys.readouterr().err
 
 
-def test_headless_camera_rate_needs_a_bag(tmp_path, capsys):
+def test_headless_camera_rate_needs_a_bag_or_a_recording(tmp_path, capsys):
     assert headless_main(['--scenario', 'press', '--grid', '9', '--duration', '0.1',
                           '--camera-rate', '5']) == 2
-    assert '--bag' in capsys.readouterr().err
+    assert '--bag or --rrd' in capsys.readouterr().err
 
 
 def test_a_scenario_file_sets_any_number_of_cameras(tmp_path, capsys):
@@ -150,7 +150,7 @@ def test_a_scenario_file_sets_any_number_of_cameras(tmp_path, capsys):
         'cameras:\n'
         '  - {name: top, position: [0.0, 0.0, 0.5], width: 80, height: 60, rate: 10}\n'
         '  - {name: side, position: [0.4, 0.0, 0.1], width: 64, height: 48, rate: 20,\n'
-        '     depth_noise_stddev: 0.001}\n')
+        '     depth_noise_stddev: 0.001, fx: 50.0, fy: 55.0, cx: 30.0, cy: 20.0}\n')
     bag = tmp_path / 'two'
     assert headless_main(['--scenario', str(scenario), '--grid', '9', '--bag', str(bag)]) == 0
     by_topic = read_with_both_readers(bag)
@@ -158,6 +158,8 @@ def test_a_scenario_file_sets_any_number_of_cameras(tmp_path, capsys):
     assert len(by_topic['/paper/top/camera_info']) == 4
     assert len(by_topic['/paper/side/camera_info']) == 7
     assert by_topic['/paper/side/depth/image_raw'][0][1].width == 64
+    np.testing.assert_allclose(by_topic['/paper/side/camera_info'][0][1].k,
+                               [50.0, 0, 30.0, 0, 55.0, 20.0, 0, 0, 1])
     top = by_topic['/paper/top/depth/image_raw'][-1][1]
     depth = np.frombuffer(bytes(top.data), '<f4').reshape(60, 80)
     assert depth[30, 40] == pytest.approx(0.5, abs=1e-3), 'straight down onto the sheet'
@@ -170,6 +172,7 @@ def test_a_scenario_file_sets_any_number_of_cameras(tmp_path, capsys):
     ('[{name: a}, {name: a}]', 'distinct'),
     ('[{name: a, rate: 0}]', 'rate'),
     ('[{name: "no spaces"}]', 'letter'),
+    ('[{name: a, fx: -1.0}]', 'fx must be > 0'),
     ('[{name: a, position: [0, 0, 0], target: [0, 0, 0]}]', 'differ'),
 ])
 def test_bad_scenario_cameras_are_refused_with_a_reason(tmp_path, capsys, cameras, reason):

@@ -1,10 +1,14 @@
 """A camera frame as ROS 2 messages (msg_adapters/camera.py, issue 16), read back from the
 real serialised bytes: depth and colour images, CameraInfo that projects like the renderer,
 an organised cloud whose points lie on the sheet and carry its material coordinates."""
+import json
+
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Header
 
 from paper_sim_ros.core import SheetConfig, SimulationConfig, Simulator
@@ -14,6 +18,7 @@ from paper_sim_ros.core.camera import (HIT_NOTHING, HIT_PAPER, HIT_PROBE, Camera
 from paper_sim_ros.core.sheet import build_flat_sheet
 from paper_sim_ros.msg_adapters.camera import (PIXEL_DTYPE, camera_info, color_image,
                                                depth_image, organized_cloud)
+from paper_sim_ros.headless import main as headless_main
 from paper_sim_ros.rerun_logger import RerunRecorder
 from paper_sim_ros.rerun_replay import read_chunks
 
@@ -161,3 +166,42 @@ def test_depth_noise_is_seeded_of_its_size_and_keeps_misses_nan():
     assert with_depth_noise(frame, 0.0, np.random.default_rng(3)) is frame
     with pytest.raises(ValueError, match='noise'):
         with_depth_noise(frame, -1.0, np.random.default_rng(3))
+
+
+def test_headless_recording_holds_the_cameras_and_still_replays(tmp_path):
+    """headless --rrd --camera-rate: each scenario camera under paper/cameras/<name> at the
+    rate, the same depth as the bag of the same run holds, and the replay is bit-identical."""
+    scenario = tmp_path / 'two_cameras.yaml'
+    scenario.write_text(
+        'duration: 0.3\n'
+        'contact: {ground_enabled: true}\n'
+        'probes: [{name: finger, radius: 0.01,\n'
+        '          keyframes: [[0, 0, 0, 0.03], [0.3, 0, 0, 0.005]]}]\n'
+        'cameras:\n'
+        '  - {name: top, position: [0.0, 0.0, 0.5], width: 80, height: 60}\n'
+        '  - {name: side, position: [0.4, 0.0, 0.1], width: 64, height: 48,\n'
+        '     depth_noise_stddev: 0.001}\n')
+    rrd, bag, metrics = tmp_path / 'run.rrd', tmp_path / 'bag', tmp_path / 'metrics.json'
+    assert headless_main(['--scenario', str(scenario), '--grid', '9', '--rrd', str(rrd),
+                          '--bag', str(bag), '--camera-rate', '10',
+                          '--metrics-json', str(metrics)]) == 0
+    depth_rows: dict[str, list] = {}
+    for chunk in read_chunks(str(rrd)):
+        if chunk.entity_path.endswith('/depth'):
+            batch = chunk.to_record_batch()
+            depth_rows.setdefault(chunk.entity_path, []).extend(
+                batch.column('DepthImage:buffer').to_pylist())
+    # 0.3 s at 10 Hz: the slots t = 0, 0.1, 0.2, 0.3
+    assert {entity: len(rows) for entity, rows in depth_rows.items()} == {
+        '/paper/cameras/top/depth': 4, '/paper/cameras/side/depth': 4}
+    recorded = np.frombuffer(bytes(depth_rows['/paper/cameras/side/depth'][-1][0]), np.float32)
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        (connection,) = [c for c in reader.connections
+                         if c.topic == '/paper/side/depth/image_raw']
+        *_, (_, _, raw) = reader.messages(connections=[connection])
+        image = reader.deserialize(raw, connection.msgtype)
+    np.testing.assert_array_equal(recorded, np.frombuffer(bytes(image.data), '<f4'))
+    replayed = tmp_path / 'replayed.json'
+    assert headless_main(['--replay', str(rrd), '--metrics-json', str(replayed)]) == 0
+    assert (json.loads(replayed.read_text())['final_positions_sha256']
+            == json.loads(metrics.read_text())['final_positions_sha256'])

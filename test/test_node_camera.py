@@ -1,6 +1,7 @@
-"""The node's virtual camera over real DDS (issue 16): depth, colour, camera info and the
-organised cloud arrive at the camera's rate, one header per frame, and show the sheet where
-it is; bad camera parameters are refused with a reason."""
+"""The node's virtual cameras over real DDS (issue 16): depth, colour, camera info and the
+organised cloud arrive at each camera's rate, one header per frame, and show the sheet where
+it is; a second camera has its own topics, frame and intrinsics; bad camera parameters are
+refused with a reason."""
 from __future__ import annotations
 
 import math
@@ -20,6 +21,9 @@ TOPICS = {'depth': ('paper/top/depth/image_raw', Image),
           'color': ('paper/top/color/image_raw', Image),
           'info': ('paper/top/camera_info', CameraInfo),
           'points': ('paper/top/points', PointCloud2)}
+# a second camera, with its intrinsics given in pixels rather than by a field of view
+SIDE_INFO = 'paper/side/camera_info'
+SIDE_WIDTH, SIDE_HEIGHT, SIDE_FX, SIDE_FY, SIDE_CX, SIDE_CY = 64, 48, 50.0, 55.0, 30.0, 20.0
 
 
 @pytest.fixture(scope='module')
@@ -27,21 +31,37 @@ def camera_node(tmp_path_factory):
     domain = new_domain_id()
     process = start_node(tmp_path_factory.mktemp('camera'), {
         'sheet.nx': 17, 'sheet.ny': 17, 'publish_rate': 5.0, 'markers_rate': 0.0,
-        'camera.rate': RATE, 'camera.name': 'top', 'camera.width': WIDTH,
-        'camera.height': HEIGHT, 'camera.horizontal_fov': FOV,
-        'camera.position': [0.0, 0.0, HEIGHT_ABOVE], 'camera.target': [0.0, 0.0, 0.0]},
+        'cameras': ['top', 'side'],
+        'top.rate': RATE, 'top.width': WIDTH, 'top.height': HEIGHT, 'top.horizontal_fov': FOV,
+        'top.position': [0.0, 0.0, HEIGHT_ABOVE], 'top.target': [0.0, 0.0, 0.0],
+        'side.rate': 5.0, 'side.width': SIDE_WIDTH, 'side.height': SIDE_HEIGHT,
+        'side.fx': SIDE_FX, 'side.fy': SIDE_FY, 'side.cx': SIDE_CX, 'side.cy': SIDE_CY,
+        'side.position': [0.5, 0.0, 0.2]},
         domain_id=domain)
     client = RosClient(domain)
     for topic, kind in TOPICS.values():
         client.subscribe(kind, topic)
+    client.subscribe(CameraInfo, SIDE_INFO)
     try:
-        client.spin_until(lambda: all(len(client.messages(topic)) >= 6
-                                      for topic, _ in TOPICS.values()), 90,
-                          'six frames of every camera topic', process)
+        # the four subscriptions are matched at different moments, so the first frames
+        # may reach only some of them: wait for six frames seen on all four
+        client.spin_until(lambda: len(frames_on_every_topic(client)) >= 6
+                          and len(client.messages(SIDE_INFO)) >= 4, 90,
+                          'six frames on all four camera topics, four of the side camera',
+                          process)
         yield client
     finally:
         client.close()
         stop_cleanly(process)
+
+
+def stamps_of(messages: list) -> list[float]:
+    return [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in messages]
+
+
+def frames_on_every_topic(client: RosClient) -> set[float]:
+    return set.intersection(*(set(stamps_of(client.messages(topic)))
+                              for topic, _ in TOPICS.values()))
 
 
 def test_every_frame_has_its_four_messages_under_one_header_at_the_rate(camera_node):
@@ -49,10 +69,9 @@ def test_every_frame_has_its_four_messages_under_one_header_at_the_rate(camera_n
     for key, (topic, _) in TOPICS.items():
         messages = camera_node.messages(topic)
         assert {m.header.frame_id for m in messages} == {'top_optical_frame'}, key
-        stamps[key] = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in messages]
-    common = set(stamps['depth']) & set(stamps['color']) & set(stamps['info']) \
-        & set(stamps['points'])
-    assert len(common) >= 5, stamps
+        stamps[key] = stamps_of(messages)
+    common = frames_on_every_topic(camera_node)
+    assert len(common) >= 6, stamps
     ordered = sorted(common)
     # simulated time between frames: 1 / rate (a dropped slot would be a multiple); the
     # first frame is the first physics frame, the next on the slot grid t = k / rate
@@ -81,6 +100,21 @@ def test_images_and_info_describe_the_camera_above_the_sheet(camera_node):
     assert rgb[HEIGHT // 2, WIDTH // 2].min() > 100, 'the sheet looks like paper, not black'
 
 
+def test_a_second_camera_has_its_own_topics_frame_rate_and_intrinsics(camera_node):
+    top = stamps_of(camera_node.messages(TOPICS['info'][0]))
+    side = camera_node.messages(SIDE_INFO)
+    info = side[-1]
+    assert {m.header.frame_id for m in side} == {'side_optical_frame'}
+    assert (info.width, info.height) == (SIDE_WIDTH, SIDE_HEIGHT)
+    np.testing.assert_allclose(info.k, [SIDE_FX, 0, SIDE_CX, 0, SIDE_FY, SIDE_CY, 0, 0, 1])
+    np.testing.assert_allclose(info.p, [SIDE_FX, 0, SIDE_CX, 0, 0, SIDE_FY, SIDE_CY, 0,
+                                        0, 0, 1, 0])
+    # 5 Hz of simulated time beside the top camera's 10 Hz (after the first frame, which is
+    # the first physics frame, both on their slot grids t = k / rate)
+    assert np.min(np.diff(stamps_of(side))[1:]) == pytest.approx(0.2, abs=1e-3)
+    assert np.min(np.diff(top)[1:]) == pytest.approx(0.1, abs=1e-3)
+
+
 def test_organised_cloud_shows_the_sheet_with_its_material_coordinates(camera_node):
     cloud = camera_node.latest(TOPICS['points'][0])
     assert (cloud.height, cloud.width, cloud.point_step) == (HEIGHT, WIDTH, 24)
@@ -96,7 +130,10 @@ def test_organised_cloud_shows_the_sheet_with_its_material_coordinates(camera_no
 
 
 @pytest.mark.parametrize('name, value, reason', [
-    ('camera.name', 'two words', 'camera.name'),
+    ('cameras', ['two words'], 'letter then letters'),
+    ('cameras', ['sheet'], 'taken by the parameters sheet'),
+    ('cameras', ['camera', 'camera'], 'distinct'),
+    ('camera.fx', -5.0, 'fx'),
     ('camera.target', [0.0, 0.0, 0.5], 'must differ'),
     ('camera.position', [0.0, float('nan'), 0.5], 'finite'),
     ('camera.rate', -1.0, 'camera.rate'),

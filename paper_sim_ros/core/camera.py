@@ -501,11 +501,14 @@ DEFAULT_TARGET = (0.0, 0.0, 0.0)
 
 def camera_looking_at(name: str = 'camera', position=DEFAULT_POSITION,
                       target=DEFAULT_TARGET, width: int = 640, height: int = 480,
-                      horizontal_fov: float = 1.0) -> CameraConfig:
+                      horizontal_fov: float = 1.0, *, fx: float | None = None,
+                      fy: float | None = None, cx: float | None = None,
+                      cy: float | None = None) -> CameraConfig:
     """A camera at ``position`` whose optical axis goes through ``target`` (world, [m]),
-    image up towards +z, or +y when it looks straight down or up. ValueError names what is
-    wrong (a name that is not a letter then letters, digits or _ — it names topics and
-    frames —, non-finite or coinciding points, a bad size or field of view)."""
+    image up towards +z, or +y when it looks straight down or up; ``fx``, ``fy``, ``cx``,
+    ``cy`` as in ``CameraConfig`` (None: derived). ValueError names what is wrong (a name
+    that is not a letter then letters, digits or _ — it names topics and frames —,
+    non-finite or coinciding points, a bad size, field of view or intrinsic)."""
     _require(isinstance(name, str) and name[:1].isalpha() and name.replace('_', '').isalnum(),
              f'camera name must be a letter then letters, digits or _, got {name!r}')
     eye = _finite_vector('position', position, 3)
@@ -514,7 +517,8 @@ def camera_looking_at(name: str = 'camera', position=DEFAULT_POSITION,
     vertical = math.hypot(aim[0] - eye[0], aim[1] - eye[1]) < 1e-9 * math.dist(eye, aim)
     return CameraConfig(name=name, width=width, height=height, horizontal_fov=horizontal_fov,
                         position=eye, orientation=look_at(
-                            eye, aim, (0.0, 1.0, 0.0) if vertical else (0.0, 0.0, 1.0)))
+                            eye, aim, (0.0, 1.0, 0.0) if vertical else (0.0, 0.0, 1.0)),
+                        fx=fx, fy=fy, cx=cx, cy=cy)
 
 
 def render_simulator(config: CameraConfig, simulator, vertex_colors: np.ndarray) -> CameraFrame:

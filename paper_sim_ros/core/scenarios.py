@@ -273,8 +273,8 @@ def _probe_from_mapping(values: dict) -> ProbeTrack:
     return ProbeTrack(name=name, radius=radius, keyframes=keyframes)
 
 
-CAMERA_KEYS = ('name', 'position', 'target', 'width', 'height', 'horizontal_fov', 'rate',
-               'depth_noise_stddev')
+CAMERA_KEYS = ('name', 'position', 'target', 'width', 'height', 'horizontal_fov', 'fx', 'fy',
+               'cx', 'cy', 'rate', 'depth_noise_stddev')
 
 
 def _camera_from_mapping(values: dict) -> ScenarioCamera:
@@ -290,7 +290,8 @@ def _camera_from_mapping(values: dict) -> ScenarioCamera:
         name, values.get('position', default.config.position),
         values.get('target', (0.0, 0.0, 0.0)), values.get('width', default.config.width),
         values.get('height', default.config.height),
-        values.get('horizontal_fov', default.config.horizontal_fov))
+        values.get('horizontal_fov', default.config.horizontal_fov),
+        **{key: values[key] for key in ('fx', 'fy', 'cx', 'cy') if key in values})
     rate = float(values.get('rate', default.rate))
     noise = float(values.get('depth_noise_stddev', 0.0))
     if not (math.isfinite(rate) and 0 < rate <= 1000):
