@@ -27,9 +27,8 @@ import numpy as np
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import Header
 
-from paper_sim_ros.core.camera import (CameraConfig, CameraFrame, back_project, intrinsics,
-                                       projection_matrix)
-from .point_cloud import point_fields, with_data
+from paper_sim_ros.core.camera import CameraConfig, CameraFrame, intrinsics, projection_matrix
+from .point_cloud import message_data, point_fields, with_data
 
 PIXEL_DTYPE = np.dtype({
     'names': ['x', 'y', 'z', 'u', 'v', 'label', 'hit'],
@@ -73,18 +72,28 @@ def camera_info(header: Header, config: CameraConfig) -> CameraInfo:
 def organized_cloud(header: Header, config: CameraConfig, frame: CameraFrame) -> PointCloud2:
     """height × width points back-projected from the depth image with the ground truth of
     each pixel (PIXEL_DTYPE); NaN where the pixel hits nothing."""
-    points = np.zeros((config.height, config.width), dtype=PIXEL_DTYPE)
-    optical = back_project(config, frame.depth)
-    points['x'], points['y'], points['z'] = np.moveaxis(optical, -1, 0)
-    points['u'] = frame.u
-    points['v'] = frame.v
+    data, points = message_data((config.height, config.width), PIXEL_DTYPE)
+    # written in place through views of the message's bytes, in float32: x y z u v at
+    # 0..16 and the label at 20 (uint16 word 10); back-projection as core.camera.back_project
+    as_float = points.view(np.float32).reshape(config.height, config.width, 6)
+    column_scale = ((np.arange(config.width) - config.principal_x)
+                    / config.focal_x).astype(np.float32)
+    row_scale = ((np.arange(config.height) - config.principal_y)
+                 / config.focal_y).astype(np.float32)
+    np.multiply(frame.depth, column_scale[None, :], out=as_float[:, :, 0])
+    np.multiply(frame.depth, row_scale[:, None], out=as_float[:, :, 1])
+    as_float[:, :, 2] = frame.depth
+    as_float[:, :, 3] = frame.u
+    as_float[:, :, 4] = frame.v
     points['label'] = frame.label
     points['hit'] = frame.hit
-    return with_data(PointCloud2(
+    cloud = PointCloud2(
         header=header, height=config.height, width=config.width,
         fields=point_fields(PIXEL_DTYPE), is_bigendian=False,
         point_step=PIXEL_DTYPE.itemsize, row_step=PIXEL_DTYPE.itemsize * config.width,
-        is_dense=bool(np.isfinite(frame.depth).all())), points)
+        is_dense=bool(np.isfinite(frame.depth).all()))
+    cloud.data = data  # after construction: a constructor copies element by element
+    return cloud
 
 
 def camera_messages(header: Header, config: CameraConfig,

@@ -67,6 +67,14 @@ POINT_FIELDS = tuple(point_fields(POINT_DTYPE))
 """The fields of ``paper/points``, in offset order."""
 
 
+def message_data(shape: tuple, dtype: np.dtype) -> tuple[array.array, np.ndarray]:
+    """A message's ``data`` (zeroed ``array('B')``) and a writable numpy view of it as
+    ``shape`` of ``dtype``: fill the view, then set ``data``; no copy of the bytes."""
+    dtype = np.dtype(dtype)
+    data = array.array('B', b'\0') * (int(np.prod(shape)) * dtype.itemsize)
+    return data, np.frombuffer(data, dtype=dtype).reshape(shape)
+
+
 def with_data(message, values: np.ndarray):
     """``message`` with its uint8 sequence ``data`` set to the bytes of ``values``, as the
     ``array('B')`` it holds. Passed to a generated message's constructor, bytes or an array
