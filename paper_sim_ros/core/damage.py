@@ -64,14 +64,16 @@ class DamageModel:
         return self.probe_compression.compression(sheet)
 
     # ------------------------------------------------------------------------ stepping
-    def advance(self, sheet: Sheet, dt: float, probes: Probes, grip_probe: np.ndarray) -> bool:
+    def advance(self, sheet: Sheet, dt: float, probes: Probes, grip_probe: np.ndarray,
+                frame_motion: np.ndarray) -> bool:
         """A frame of ``dt`` has passed (``probes``: where they went in it; ``grip_probe``:
-        per vertex, the probe pinching it, or -1); run the checks that fall due. Returns
-        True if the mesh changed (the caller must then rebuild what derives from it)."""
+        per vertex, the probe pinching it, or -1; ``frame_motion``: each vertex's
+        displacement in it [m]); run the checks that fall due. Returns True if the mesh
+        changed (the caller must then rebuild what derives from it)."""
         if not self.config.enabled:
             return False
         if self.held_inextensible and probes.count:
-            self.probe_compression.observe(sheet, probes, grip_probe)
+            self.probe_compression.observe(sheet, probes, grip_probe, frame_motion)
         self._clock += dt * self.config.check_rate
         periods = int(math.floor(self._clock + 1e-9))
         if periods == 0:

@@ -221,10 +221,13 @@ def project_attachments(positions, attached_vertex, anchor_vertex, attachment_le
 
 @njit(cache=True)
 def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center_motion,
-                        radius, friction, apply_friction, touched):
+                        radius, friction, apply_friction, pad_height, touched):
     """Move vertices inside a sphere to its surface; with ``apply_friction``, cancel (static)
     or shorten (kinetic, Coulomb: by friction × depth) their tangential slip relative to
-    the sphere's own motion over the step. Marks the vertices it moved in ``touched``."""
+    the sphere's own motion over the step. Marks the vertices it moved in ``touched``.
+    Below ``pad_height`` (the table; -inf without one) the sphere is flattened like a
+    fingertip pressed on the table: a vertex on the table under it is pinched there, not
+    pushed sideways out of the sphere."""
     for v in range(positions.shape[0]):
         if inverse_mass[v] == 0.0:
             continue
@@ -241,6 +244,11 @@ def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center
             nx, ny, nz = dx / distance, dy / distance, dz / distance
         depth = radius - distance
         touched[v] = True
+        if center[2] + radius * nz < pad_height:
+            # under the flattened pad: its face, the table plane facing down, is the
+            # contact; the vertex is pressed onto the table and pinched there
+            depth = max(0.0, positions[v, 2] - pad_height)
+            nx, ny, nz = 0.0, 0.0, -1.0
         positions[v, 0] += depth * nx
         positions[v, 1] += depth * ny
         positions[v, 2] += depth * nz
@@ -286,6 +294,24 @@ def project_ground(positions, start_positions, inverse_mass, ground_height, fric
 
 
 @njit(cache=True)
+def table_friction(velocities, support, friction, h):
+    """Coulomb friction of the table on the velocities a step starts from: each vertex the
+    table supports (``support`` [m], its push over the last sub-step) loses up to
+    friction × support / h of its sliding speed, and stops if it had less. Taken before
+    the implicit solve, the solve's springs carry the pull that drags a sheet over the
+    table, as its tension does, instead of friction undoing the solve vertex by vertex."""
+    for v in range(velocities.shape[0]):
+        if support[v] <= 0.0:
+            continue
+        speed = np.sqrt(velocities[v, 0] ** 2 + velocities[v, 1] ** 2)
+        if speed <= 0.0:
+            continue
+        keep = max(0.0, 1.0 - friction * support[v] / (h * speed))
+        velocities[v, 0] *= keep
+        velocities[v, 1] *= keep
+
+
+@njit(cache=True)
 def update_table_reaction(positions, free, mass_over_h2, ground_height, reaction):
     """One projected Uzawa step on the table's reaction in an implicit solve (the solve's
     right-hand side gains ``reaction`` [N] in z): λ_v ← max(0, λ_v + m_v/h² (ground − z_v))
@@ -304,7 +330,7 @@ def update_table_reaction(positions, free, mass_over_h2, ground_height, reaction
 
 @njit(cache=True)
 def project_probes(positions, start_positions, inverse_mass, probe_start, probe_end,
-                   probe_radius, probe_active, friction, sweep, touched):
+                   probe_radius, probe_active, friction, sweep, pad_height, touched):
     """Push vertices out of every active probe. With ``sweep`` the probe is swept from its
     start to its end centre in moves of at most a quarter radius, so that a probe faster
     than one radius per step pushes the sheet along instead of tunnelling through it;
@@ -327,7 +353,7 @@ def project_probes(positions, start_positions, inverse_mass, probe_start, probe_
             for k in range(3):
                 center[k] = probe_start[p, k] + fraction * motion[k]
             _push_out_of_sphere(positions, start_positions, inverse_mass, center, motion,
-                                radius, friction, sweep and m == moves, touched)
+                                radius, friction, sweep and m == moves, pad_height, touched)
 
 
 @njit(cache=True)
@@ -354,9 +380,9 @@ def grip_pinched(positions, inverse_mass, probe_center, probe_radius, pressing, 
 
 
 @njit(cache=True)
-def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset):
-    """Release the vertices of probes no longer pressing; carry the others with their probe
-    (at their gripped offset)."""
+def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, ground_height):
+    """Release the vertices of probes no longer pressing; carry the others along the table
+    with their probe (at their gripped offset), pinched on it."""
     for v in range(positions.shape[0]):
         p = grip_probe[v]
         if p < 0:
@@ -364,8 +390,9 @@ def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset):
         if not pressing[p]:
             grip_probe[v] = -1
             continue
-        for k in range(3):
-            positions[v, k] = probe_center[p, k] + grip_offset[v, k]
+        positions[v, 0] = probe_center[p, 0] + grip_offset[v, 0]
+        positions[v, 1] = probe_center[p, 1] + grip_offset[v, 1]
+        positions[v, 2] = ground_height
 
 
 @njit(cache=True, inline='always')
@@ -401,34 +428,32 @@ def excess_compression(positions, spring_vertices, rest_length, threshold):
 
 
 @njit(cache=True)
-def table_dimple(x, y, ground_height, probe_center, probe_radius, probe_active):
-    """How far below the table the lowest active probe's surface reaches at (x, y) [m]
-    (0 where no probe reaches below the table there): the dimple a probe presses into the
-    yielding table."""
+def table_penetration(positions, ground_height):
+    """Deepest any vertex sits below the table [m]."""
     deepest = 0.0
-    for p in range(probe_radius.shape[0]):
-        if not probe_active[p]:
-            continue
-        dx = x - probe_center[p, 0]
-        dy = y - probe_center[p, 1]
-        across = probe_radius[p] ** 2 - dx * dx - dy * dy
-        if across <= 0.0:
-            continue
-        deepest = max(deepest, ground_height - (probe_center[p, 2] - np.sqrt(across)))
+    for v in range(positions.shape[0]):
+        deepest = max(deepest, ground_height - positions[v, 2])
     return deepest
 
 
 @njit(cache=True)
-def table_penetration(positions, ground_height, probe_center, probe_radius, probe_active):
-    """Deepest any vertex sits below the table beyond the probes' dimples in it [m]."""
+def probe_penetration(positions, probe_center, probe_radius, probe_active, ground_height,
+                      ground_enabled):
+    """Deepest any vertex sits inside an active probe [m]. A probe pressed into the table is
+    flattened there like a fingertip (its sphere cut by the table plane), so a vertex
+    pinched on the table under it is at its surface, not inside it."""
     deepest = 0.0
-    for v in range(positions.shape[0]):
-        depth = ground_height - positions[v, 2]
-        if depth <= deepest:
+    for p in range(probe_radius.shape[0]):
+        if not probe_active[p]:
             continue
-        depth -= table_dimple(positions[v, 0], positions[v, 1], ground_height, probe_center,
-                              probe_radius, probe_active)
-        deepest = max(deepest, depth)
+        for v in range(positions.shape[0]):
+            dx = positions[v, 0] - probe_center[p, 0]
+            dy = positions[v, 1] - probe_center[p, 1]
+            dz = positions[v, 2] - probe_center[p, 2]
+            depth = probe_radius[p] - np.sqrt(dx * dx + dy * dy + dz * dz)
+            if ground_enabled:
+                depth = min(depth, positions[v, 2] - ground_height)
+            deepest = max(deepest, depth)
     return deepest
 
 
@@ -441,9 +466,9 @@ def all_finite(values):
 
 
 @njit(cache=True)
-def accumulate_probe_compression(positions, normals, spring_vertices, rest_length, springs,
-                                 probe_start, probe_end, probe_radius, probe_active,
-                                 grip_probe, reach, compression):
+def accumulate_probe_compression(positions, normals, frame_motion, spring_vertices,
+                                 rest_length, springs, probe_start, probe_end, probe_radius,
+                                 probe_active, grip_probe, reach, compression):
     """Add to ``compression[s]`` the compression the probes' motion over one frame imposes
     on each listed spring (core/probe_compression.py says why this one). Each vertex gets a
     push u, of which only the part in the sheet's tangent plane counts (``normals``: the
@@ -452,7 +477,10 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
       pushes the vertices it pinches by its travel Δc;
     - any other probe pushes a vertex within ``reach`` × radius of its end centre by
       u = max(0, Δc · n) n (n: the contact normal).
-    The spring (i, j) shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0."""
+    The spring (i, j) shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0.
+    Where only one end is pushed, the other's u is how far it actually went over the frame
+    (``frame_motion``, in its tangent plane): sheet that gets out of the way ahead of a
+    probe, as a sheet dragged over the table does, relieves the push instead of taking it."""
     vertex_count = positions.shape[0]
     probe_count = probe_radius.shape[0]
     pinching = np.zeros(probe_count, dtype=np.bool_)
@@ -460,6 +488,7 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
         if grip_probe[v] >= 0:
             pinching[grip_probe[v]] = True
     push = np.zeros((vertex_count, 3))
+    pushed = np.zeros(vertex_count, dtype=np.bool_)
     for p in range(probe_count):
         if not probe_active[p]:
             continue
@@ -488,6 +517,7 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
                 ux = scale * dx
                 uy = scale * dy
                 uz = scale * dz
+            pushed[v] = True
             across = ux * normals[v, 0] + uy * normals[v, 1] + uz * normals[v, 2]
             push[v, 0] += ux - across * normals[v, 0]
             push[v, 1] += uy - across * normals[v, 1]
@@ -496,11 +526,21 @@ def accumulate_probe_compression(positions, normals, spring_vertices, rest_lengt
         s = springs[n]
         i = spring_vertices[s, 0]
         j = spring_vertices[s, 1]
+        if not (pushed[i] or pushed[j]):
+            continue
         ux = push[i, 0] - push[j, 0]
         uy = push[i, 1] - push[j, 1]
         uz = push[i, 2] - push[j, 2]
-        if ux == 0.0 and uy == 0.0 and uz == 0.0:
-            continue
+        if pushed[i] != pushed[j]:
+            free = j if pushed[i] else i
+            sign = 1.0 if pushed[i] else -1.0
+            mx = frame_motion[free, 0]
+            my = frame_motion[free, 1]
+            mz = frame_motion[free, 2]
+            across = mx * normals[free, 0] + my * normals[free, 1] + mz * normals[free, 2]
+            ux -= sign * (mx - across * normals[free, 0])
+            uy -= sign * (my - across * normals[free, 1])
+            uz -= sign * (mz - across * normals[free, 2])
         dx = positions[j, 0] - positions[i, 0]
         dy = positions[j, 1] - positions[i, 1]
         dz = positions[j, 2] - positions[i, 2]

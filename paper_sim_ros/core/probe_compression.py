@@ -45,16 +45,18 @@ class ProbeCompression:
     def __init__(self) -> None:
         self._pushed = np.zeros(0)
 
-    def observe(self, sheet: Sheet, probes: Probes, grip_probe: np.ndarray) -> None:
+    def observe(self, sheet: Sheet, probes: Probes, grip_probe: np.ndarray,
+                frame_motion: np.ndarray) -> None:
         """Add up the compression the probes' motion over this frame imposes on the HINGE
         springs they push (``probes``: with ``start`` and ``end``; ``grip_probe``: per
-        vertex, the probe that pinches it against the table, or -1)."""
+        vertex, the probe that pinches it against the table, or -1; ``frame_motion``: each
+        vertex's displacement over the frame [m])."""
         if self._pushed.shape[0] != sheet.spring_count:
             self._pushed = np.zeros(sheet.spring_count)
         if not np.any(probes.active):
             return
         accumulate_probe_compression(
-            sheet.positions, vertex_normals(sheet.positions, sheet.triangles),
+            sheet.positions, vertex_normals(sheet.positions, sheet.triangles), frame_motion,
             sheet.spring_vertices, sheet.spring_rest_length,
             np.flatnonzero(sheet.spring_kind == HINGE), probes.start, probes.end,
             probes.radius, probes.active, grip_probe, PROBE_REACH, self._pushed)

@@ -177,3 +177,121 @@ class GlobalStep:
         """Overwrite the free vertices of ``positions`` with the global step's solution."""
         _solve_factored(*self._factors, *self._coupling, self.free, rhs, positions,
                         self._work)
+
+
+class ConstrainedSolve:
+    """A global step's solution with some vertices constrained, without a new factor: each
+    constraint row r asks dᵣ · x[vᵣ] = cᵣ (a held vertex is three rows, e_x, e_y, e_z; a
+    probe contact one, along its normal). For the step's system A x = b that is the KKT
+    system A x + Σ λᵣ dᵣ e_vᵣ = b, so with x₀ = A⁻¹ b and the columns z_v = A⁻¹ e_v
+
+        x = x₀ − Σᵣ λᵣ dᵣ z_vᵣ,   S λ = (dᵣ · x₀[vᵣ] − cᵣ)ᵣ,   Sᵣₛ = (dᵣ · dₛ) z_vₛ[vᵣ],
+
+    exactly what a factor with those vertices held would give. A column costs a third of
+    a solve and is kept while the factor stands, so a probe moving over the sheet pays for
+    the vertices it reaches, not a factorisation per change of what it touches."""
+
+    def __init__(self, step: GlobalStep, vertex_count: int) -> None:
+        self.step = step
+        self._column_of = np.full(vertex_count, -1, dtype=np.int64)
+        self._columns = np.zeros((0, vertex_count))
+        """Row c: z_v of the vertex whose ``_column_of`` is c (zero at pinned vertices)."""
+        self._column_count = 0
+
+    def _ensure_columns(self, vertices: np.ndarray) -> None:
+        missing = np.unique(vertices[self._column_of[vertices] < 0])
+        if missing.size == 0:
+            return
+        vertex_count = self._column_of.size
+        needed = self._column_count + missing.size
+        if needed > self._columns.shape[0]:
+            grown = np.zeros((max(needed, 2 * self._columns.shape[0], 16), vertex_count))
+            grown[:self._column_count] = self._columns[:self._column_count]
+            self._columns = grown
+        unit = np.zeros((vertex_count, 3))
+        response = np.zeros((vertex_count, 3))
+        for start in range(0, missing.size, 3):  # three columns per solve
+            batch = missing[start:start + 3]
+            unit[:] = 0.0
+            unit[batch, np.arange(batch.size)] = 1.0
+            self.step.solve(unit, response)
+            for axis, vertex in enumerate(batch):
+                self._columns[self._column_count] = response[:, axis]
+                self._column_of[vertex] = self._column_count
+                self._column_count += 1
+
+    def solve(self, rhs: np.ndarray, positions: np.ndarray, row_vertex: np.ndarray,
+              row_direction: np.ndarray, row_value: np.ndarray) -> np.ndarray:
+        """Overwrite the free vertices of ``positions`` with the solution under the rows
+        (vertex, unit direction, value [m]); returns the multipliers λ (one per row; a row
+        pushes its vertex along its direction where λ < 0)."""
+        self.step.solve(rhs, positions)
+        if row_vertex.size == 0:
+            return np.zeros(0)
+        self._ensure_columns(row_vertex)
+        row_column = self._column_of[row_vertex]
+        multipliers = np.empty(row_vertex.size)
+        _constrain(self._columns, row_vertex, row_column, row_direction, row_value,
+                   positions, multipliers)
+        return multipliers
+
+
+@njit(cache=True)
+def _constrain(columns, row_vertex, row_column, row_direction, row_value, positions,
+               multipliers):
+    """x ← x − Σ λᵣ dᵣ z_vᵣ with S λ = d · x₀ − c (ConstrainedSolve), S by Cholesky (it is
+    A⁻¹ seen through the rows: symmetric positive definite while no two rows of one vertex
+    are parallel). Deterministic: no BLAS."""
+    rows = row_vertex.shape[0]
+    system = np.empty((rows, rows))
+    for r in range(rows):
+        multipliers[r] = (row_direction[r, 0] * positions[row_vertex[r], 0]
+                          + row_direction[r, 1] * positions[row_vertex[r], 1]
+                          + row_direction[r, 2] * positions[row_vertex[r], 2]) - row_value[r]
+        for s in range(r + 1):
+            alignment = (row_direction[r, 0] * row_direction[s, 0]
+                         + row_direction[r, 1] * row_direction[s, 1]
+                         + row_direction[r, 2] * row_direction[s, 2])
+            system[r, s] = alignment * columns[row_column[s], row_vertex[r]]
+    # Cholesky S = G Gᵀ in the lower triangle, then G Gᵀ λ = residual
+    for r in range(rows):
+        for s in range(r + 1):
+            total = system[r, s]
+            for k in range(s):
+                total -= system[r, k] * system[s, k]
+            if r == s:
+                system[r, r] = np.sqrt(max(total, 1e-300))
+            else:
+                system[r, s] = total / system[s, s]
+    for r in range(rows):
+        total = multipliers[r]
+        for k in range(r):
+            total -= system[r, k] * multipliers[k]
+        multipliers[r] = total / system[r, r]
+    for step in range(rows):
+        r = rows - 1 - step
+        total = multipliers[r]
+        for k in range(r + 1, rows):
+            total -= system[k, r] * multipliers[k]
+        multipliers[r] = total / system[r, r]
+    # one pass over the sheet per distinct column: the rows of a vertex add up first
+    weight = np.zeros((columns.shape[0], 3))
+    used = np.zeros(columns.shape[0], dtype=np.bool_)
+    for r in range(rows):
+        c = row_column[r]
+        used[c] = True
+        for axis in range(3):
+            weight[c, axis] += multipliers[r] * row_direction[r, axis]
+    for c in range(columns.shape[0]):
+        if not used[c]:
+            continue
+        w0 = weight[c, 0]
+        w1 = weight[c, 1]
+        w2 = weight[c, 2]
+        column = columns[c]
+        for v in range(positions.shape[0]):
+            z = column[v]
+            if z != 0.0:
+                positions[v, 0] -= z * w0
+                positions[v, 1] -= z * w1
+                positions[v, 2] -= z * w2

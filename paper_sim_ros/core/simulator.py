@@ -30,7 +30,9 @@ from .config import SimulationConfig
 from .bending import HingeBending
 from .damage import DamageModel
 from .probes import Probes
-from .projective import GlobalStep, inertial_step, local_targets, spring_entries
+from .kernels import EPSILON_LENGTH
+from .projective import (ConstrainedSolve, GlobalStep, inertial_step, local_targets,
+                         spring_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
 from .topology import vertex_normals
 
@@ -45,6 +47,10 @@ TABLE_TOLERANCE = 1e-6
 BUCKLING_PROGRESS = 0.01
 """The share of the springs' compression beyond ``buckling_compression`` an extra
 local/global iteration must take out for the next one to run (docs/solver.md)."""
+FAST_PROBE_TRAVEL = 0.25
+"""A probe moving more than this many radii in a sub-step carries what it touches."""
+GRIP_ROW, CONTACT_ROW = 0, 1
+"""Kinds of the solves' constraint rows (Simulator._contact_rows)."""
 
 
 class Simulator:
@@ -160,20 +166,21 @@ class Simulator:
         self._factor_global_steps()
 
     def _factor_global_steps(self) -> None:
-        """Factor the springs' and the bending's systems, the pinned and the gripped
-        vertices held."""
+        """Factor the springs' and the bending's systems, the pinned vertices held (what
+        the probes hold changes every sub-step: ConstrainedSolve holds it)."""
         sheet = self.sheet
         h = self.config.solver.dt / self.config.solver.substeps
-        held = sheet.pinned | (self._grip_probe >= 0)
-        self._factored_held = held
-        self._table_reaction[held] = 0.0  # held vertices are not the solve's to support
+        pinned = sheet.pinned
+        self._table_reaction[pinned] = 0.0  # held vertices are not the solve's to support
         self._global_step = self._bending_step = None
-        if np.any(~held):
-            self._bending_step = GlobalStep(sheet.vertex_mass, held,
-                                            self._bending.matrix_entries(), h)
-            self._global_step = GlobalStep(
-                sheet.vertex_mass, held,
-                spring_entries(self._held_ends, self._global_weight), h)
+        if np.any(~pinned):
+            self._bending_step = ConstrainedSolve(
+                GlobalStep(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h),
+                sheet.vertex_count)
+            self._global_step = ConstrainedSolve(
+                GlobalStep(sheet.vertex_mass, pinned,
+                           spring_entries(self._held_ends, self._global_weight), h),
+                sheet.vertex_count)
 
     def _build_attachments(self) -> None:
         sheet = self.sheet
@@ -218,7 +225,8 @@ class Simulator:
             self.sheet.positions[:] = saved_positions
             self.sheet.velocities[:] = 0.0
         # damage: checked at its own rate in simulated time, never per sub-step
-        if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe):
+        if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
+                               self.sheet.positions - saved_positions):
             self.topology_changed()
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
@@ -229,25 +237,37 @@ class Simulator:
         sheet = self.sheet
         positions, velocities = sheet.positions, sheet.velocities
         start_positions = positions.copy()
+        # the table's push inside the last solve, as a displacement [m]: its friction's share
+        self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
         # inertia, springs and bending: implicit ('constrained') or as forces
-        if self.config.solver.method == 'constrained':
-            self._projective_step(h, probe_to)
+        constrained = self.config.solver.method == 'constrained'
+        if constrained:
+            contact = self.config.contact
+            if contact.ground_enabled:
+                kernels.table_friction(velocities, self._table_support,
+                                       contact.ground_friction, h)
+            self._projective_step(h, probe_from, probe_to, start_positions)
         else:
             self._force_step(h)
 
-        # contact (swept probes, then the table), with friction
+        # contact (swept probes, then the table), with friction (the table's is in the
+        # velocities already for the implicit solver)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
-        # the table's push inside the solve, as a displacement [m]: its friction's share
-        self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
-        self._contact(positions, start_positions, probe_from, probe_to, True, touched)
+        self._contact(positions, start_positions, probe_from, probe_to, True, touched,
+                      table_friction=not constrained)
         self._grip(positions, probe_to, touched)
 
         # stretch: strain limiting, attachments, and contact kept satisfied alongside.
-        # A probe is kinematic: what it touches moves with it and the sheet follows, so a
-        # fast probe drags the sheet along instead of the sheet pulling its patch back
-        # through the probe
+        # What a probe pinches on the table goes where the probe goes. What it only touches
+        # the solve has already placed on its surface, and the sheet may slide over it,
+        # unless the probe moves faster than a quarter radius in the sub-step: then the
+        # sheet is dragged along instead of pulling its patch back through the probe
         if self._constraint_springs.size:
-            inverse_mass = np.where(touched, 0.0, self._inverse_mass)
+            carried = self._grip_probe >= 0
+            travel = np.linalg.norm(probe_to - probe_from, axis=1)
+            if np.any(self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)):
+                carried |= touched
+            inverse_mass = np.where(carried, 0.0, self._inverse_mass)
             self._limit_strain(positions, start_positions, probe_from, probe_to, inverse_mass)
 
         # velocities from the positions actually reached
@@ -286,7 +306,8 @@ class Simulator:
         velocities += delta_v
         positions += h * velocities
 
-    def _projective_step(self, h: float, probe_to: np.ndarray) -> None:
+    def _projective_step(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray,
+                         start_positions: np.ndarray) -> None:
         """Implicit Euler split in two: the springs by local/global iterations
         (core/projective.py), and after the first of them one solve of the bending system
         (core/bending.py) from where the springs put the sheet; the remaining iterations
@@ -300,7 +321,6 @@ class Simulator:
         solver = self.config.solver
         positions = sheet.positions
         weighted_inertia = np.empty_like(positions)
-        self._pressed_in = positions[:, 2] < self.config.contact.ground_height
         # inertia: the starting iterate y = x + h v + h² g
         inertial_step(positions, sheet.velocities, sheet.pinned, sheet.vertex_mass, h,
                       solver.air_damping, np.asarray(solver.gravity, dtype=np.float64),
@@ -308,11 +328,11 @@ class Simulator:
         # gripped vertices are where their probe puts them: held in the global steps like
         # pins, so that the whole sheet, not only its gripped patch, follows the probe
         gripped = self._grip_probe >= 0
-        if not np.array_equal(gripped | sheet.pinned, self._factored_held):
-            self._factor_global_steps()
         positions[gripped] = probe_to[self._grip_probe[gripped]] + self._grip_offset[gripped]
+        positions[gripped, 2] = self.config.contact.ground_height  # pinched on the table
         if self._global_step is None:
             return
+        self._rows = self._contact_rows(h, positions, probe_from, probe_to, start_positions)
         inertia_weight = (sheet.vertex_mass / (h * h))[:, None]
         rhs = np.empty_like(positions)
         iterations = solver.projective_iterations
@@ -360,21 +380,16 @@ class Simulator:
         its bending stiffness."""
         contact = self.config.contact
         if not contact.ground_enabled:
-            self._bending_step.solve(rhs, positions)
+            self._bending_step.solve(rhs, positions, *self._rows)
             return
-        # where a probe pressed the sheet into the table (which yields under it like a desk
-        # mat) the probe, not the table, places it
-        free = self._bending_step.free
-        pressed_in = self._pressed_in
-        free = free[~pressed_in[free]]
-        self._table_reaction[pressed_in] = 0.0
+        free = self._bending_step.step.free
         inertia_z = rhs[:, 2].copy()
         reaction = self._table_reaction
         trial = reaction.copy()
         momentum = 1.0
         for _ in range(TABLE_ITERATIONS):
             rhs[:, 2] = inertia_z + trial
-            self._bending_step.solve(rhs, positions)
+            self._bending_step.solve(rhs, positions, *self._rows)
             if kernels.update_table_reaction(positions, free, mass_over_h2,
                                              contact.ground_height, trial) < TABLE_TOLERANCE:
                 reaction[:] = trial
@@ -391,7 +406,54 @@ class Simulator:
         """One local/global iteration of the held springs (core/projective.py)."""
         local_targets(positions, weighted_inertia, self._held_ends, self._held_rest,
                       self._global_weight, rhs)
-        self._global_step.solve(rhs, positions)
+        multipliers = self._global_step.solve(rhs, positions, *self._rows)
+        # a contact row that pulls its vertex towards the probe is let go: contact only
+        # pushes (the grips' rows, three to a vertex, hold)
+        vertex, direction, value, kind = self._rows + (self._row_kind,)
+        pulling = (kind == CONTACT_ROW) & (multipliers > 0.0)
+        if np.any(pulling):
+            keep = ~pulling
+            self._rows = (vertex[keep], direction[keep], value[keep])
+            self._row_kind = kind[keep]
+            self._global_step.solve(rhs, positions, *self._rows)
+
+    def _contact_rows(self, h, positions, probe_from, probe_to, start_positions) -> tuple:
+        """What the probes hold in this sub-step's solves, as ConstrainedSolve rows: each
+        gripped vertex where its probe carries it (three rows), and each vertex a probe
+        reaches from where inertia takes it on that probe's surface along its normal (one
+        row, so the sheet slides over the probe instead of being dragged through itself)."""
+        sheet = self.sheet
+        gripped = np.flatnonzero(self._grip_probe >= 0)
+        touched = np.zeros(sheet.vertex_count, dtype=bool)
+        if self.probes.count:
+            self._contact(positions, start_positions, probe_from, probe_to, True, touched,
+                          table_friction=False)
+        touched[gripped] = False
+        touched[sheet.pinned] = False
+        contact = np.flatnonzero(touched)
+        normal = np.zeros((contact.size, 3))
+        if contact.size:
+            # the normal of the nearest active probe's surface at the projected vertex
+            offset = positions[contact, None, :] - probe_to[None, :, :]
+            gap = np.linalg.norm(offset, axis=2) - self.probes.radius[None, :]
+            gap[:, ~self.probes.active] = np.inf
+            nearest = np.argmin(gap, axis=1)
+            normal = offset[np.arange(contact.size), nearest]
+            normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
+            ground = self.config.contact
+            if ground.ground_enabled:
+                # pinched on the table under a flattened pad: the pad's face is the contact
+                surface_z = probe_to[nearest, 2] + self.probes.radius[nearest] * normal[:, 2]
+                pinched = surface_z < ground.ground_height
+                normal[pinched] = (0.0, 0.0, -1.0)
+        vertex = np.concatenate([np.repeat(gripped, 3), contact])
+        direction = np.concatenate([np.tile(np.eye(3), (gripped.size, 1)), normal])
+        value = np.concatenate([positions[gripped].reshape(-1),
+                                np.einsum('va,va->v', normal, positions[contact])])
+        self._row_kind = np.concatenate([np.full(3 * gripped.size, GRIP_ROW),
+                                         np.full(contact.size, CONTACT_ROW)])
+        self._table_reaction[gripped] = 0.0  # held vertices are not the solve's to support
+        return vertex, direction, value
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
                       inverse_mass) -> None:
@@ -416,20 +478,23 @@ class Simulator:
             self._contact(positions, start_positions, probe_from, probe_to, False)
 
     def _contact(self, positions, start_positions, probe_from, probe_to, with_friction,
-                 touched=None):
+                 touched=None, table_friction=True):
         contact = self.config.contact
-        # the table first, so that a probe pressed into it has the last word: the table
-        # yields under a probe like a desk mat, and the sheet dimples into it
-        if contact.ground_enabled:
-            kernels.project_ground(positions, start_positions, self._inverse_mass,
-                                   contact.ground_height, contact.ground_friction,
-                                   with_friction, self._table_support)
+        # the probes first, the table last: the table is rigid, and a probe pressed into
+        # it is flattened there like a fingertip, pinching the sheet on the table
         if self.probes.count:
             kernels.project_probes(positions, start_positions, self._inverse_mass,
                                    probe_from, probe_to, self.probes.radius,
-                                   self.probes.active, contact.probe_friction, with_friction,
+                                   self.probes.active,
+                                   contact.probe_friction if with_friction else 0.0, True,
+                                   contact.ground_height if contact.ground_enabled
+                                   else -np.inf,
                                    touched if touched is not None
                                    else np.zeros(positions.shape[0], dtype=bool))
+        if contact.ground_enabled:
+            kernels.project_ground(positions, start_positions, self._inverse_mass,
+                                   contact.ground_height, contact.ground_friction,
+                                   with_friction and table_friction, self._table_support)
 
     def _grip(self, positions, probe_to, touched) -> None:
         """A probe pressing the sheet into the table pinches it, and where the probe's
@@ -445,7 +510,7 @@ class Simulator:
         pressing = self.probes.active & (probe_to[:, 2] - self.probes.radius
                                          < contact.ground_height)
         kernels.hold_gripped(positions, probe_to, pressing, self._grip_probe,
-                             self._grip_offset)
+                             self._grip_offset, contact.ground_height)
         kernels.grip_pinched(positions, self._inverse_mass, probe_to, self.probes.radius,
                              pressing, contact.ground_height, self._grip_probe,
                              self._grip_offset)
@@ -509,23 +574,20 @@ class Simulator:
         return float(kinetic + potential + elastic)
 
     def max_probe_penetration(self) -> float:
-        """Deepest any vertex sits inside an active probe now [m] (0 when none)."""
-        deepest = 0.0
-        for p in np.flatnonzero(self.probes.active):
-            distance = np.linalg.norm(self.sheet.positions - self.probes.end[p], axis=1)
-            deepest = max(deepest, float(np.max(self.probes.radius[p] - distance)))
-        return deepest
+        """Deepest any vertex sits inside an active probe now [m] (0 when none); a probe
+        pressed into the table is flattened there (kernels.probe_penetration)."""
+        contact = self.config.contact
+        probes = self.probes
+        return float(kernels.probe_penetration(self.sheet.positions, probes.end, probes.radius,
+                                               probes.active, contact.ground_height,
+                                               contact.ground_enabled))
 
     def max_table_penetration(self) -> float:
-        """Deepest any vertex sits below the table now [m] (0 without a table). Under an
-        active probe pressed into the table, which yields there like a desk mat, a vertex
-        may sit as deep as the probe's surface (the dimple): only what lies deeper counts."""
+        """Deepest any vertex sits below the table now [m] (0 without a table)."""
         contact = self.config.contact
         if not contact.ground_enabled:
             return 0.0
-        probes = self.probes
-        return float(kernels.table_penetration(self.sheet.positions, contact.ground_height,
-                                               probes.end, probes.radius, probes.active))
+        return float(kernels.table_penetration(self.sheet.positions, contact.ground_height))
 
 
 def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.ndarray:
