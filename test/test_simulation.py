@@ -369,10 +369,11 @@ def test_final_motion_metrics_say_how_still_the_sheet_is_at_the_end():
     assert resting['final_kinetic_energy_j'] < 1e-3 * swinging['final_kinetic_energy_j']
 
 
-def test_table_penetration_counts_depth_below_the_table_beyond_a_pressed_probe():
-    """max_table_penetration: a vertex 1 mm under the table counts 1 mm; under a probe pressed
-    2 mm into the (yielding) table it may sit on the probe's surface, and only what lies
-    deeper than that counts."""
+def test_penetrations_count_below_the_rigid_table_and_inside_the_flattened_fingertip():
+    """max_table_penetration: the table is rigid, a vertex 1 mm under it counts 1 mm.
+    max_probe_penetration: a probe pressed 2 mm into the table is flattened there like a
+    fingertip, so a vertex pinched on the table under it is on its surface, not 2 mm in;
+    one above the table inside the sphere counts its distance to the nearer face."""
     config = SimulationConfig(sheet=SheetConfig(nx=5, ny=5),
                               contact=ContactConfig(ground_enabled=True), damage=NO_DAMAGE)
     simulator = Simulator(config)
@@ -386,9 +387,8 @@ def test_table_penetration_counts_depth_below_the_table_beyond_a_pressed_probe()
     positions[corner, 2] = 0.0
     radius = 0.01
     simulator.set_probes([[0.0, 0.0, radius - 0.002]], [radius], [True])
-    positions[centre, 2] = -0.002  # on the probe's lowest point: in its dimple
-    assert simulator.max_table_penetration() < 1e-12
-    positions[centre, 2] = -0.003  # 1 mm deeper than the probe reaches
-    np.testing.assert_allclose(simulator.max_table_penetration(), 0.001, rtol=1e-9)
-    simulator.set_probes([[0.0, 0.0, radius - 0.002]], [radius], [False])
-    np.testing.assert_allclose(simulator.max_table_penetration(), 0.003, rtol=1e-9)
+    assert simulator.max_probe_penetration() < 1e-12  # pinched under the pad
+    positions[centre, 2] = 0.0005  # above the table, inside the sphere: 0.5 mm above the pad
+    np.testing.assert_allclose(simulator.max_probe_penetration(), 0.0005, rtol=1e-9)
+    positions[centre, 2] = 0.016  # 2 mm inside the sphere's top (centre 8 mm up)
+    np.testing.assert_allclose(simulator.max_probe_penetration(), 0.002, rtol=1e-9)

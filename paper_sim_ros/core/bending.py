@@ -187,17 +187,52 @@ def bending_energy(positions, quads, weights, stiffness, rest_curvature):
     return total
 
 
+@njit(cache=True)
+def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_curvature):
+    """Perfect plasticity of bending: a hinge whose curvature κ departs from its rest κ0 by
+    more than ``yield_curvature`` × its width (κ is an angle; the width turns it into a
+    curvature [1/m]) has κ0 moved towards κ until it departs by just that.
+    Returns how many hinges yielded."""
+    frame = np.empty((3, 3))
+    geometry = np.empty((3, 3))
+    curvature = np.empty(3)
+    yielded = 0
+    for h in range(quads.shape[0]):
+        if stiffness[h] == 0.0:
+            continue
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
+        edge_length = np.sqrt(max(np.sum(geometry[0] ** 2), 1e-300))
+        # (A_r + A_l) / (√3 |e|): the angle of a cylinder of unit curvature across this
+        # hinge, by the calibration of the stiffness k (hinge_rest_state)
+        width = 0.5 * (np.sqrt(np.sum(geometry[1] ** 2))
+                       + np.sqrt(np.sum(geometry[2] ** 2))) / (np.sqrt(3.0) * edge_length)
+        _curvature_in_frame(positions, quads, weights, h, frame, curvature)
+        excess = 0.0
+        for row in range(3):
+            excess += (curvature[row] - rest_curvature[h, row]) ** 2
+        excess = np.sqrt(excess)
+        limit = yield_curvature * width
+        if excess > limit:
+            share = 1.0 - limit / excess
+            for row in range(3):
+                rest_curvature[h, row] += share * (curvature[row] - rest_curvature[h, row])
+            yielded += 1
+    return yielded
+
+
 class HingeBending:
     """The bending state of one mesh: its hinges, weights, stiffness and rest curvature.
     Rebuilt whenever the mesh changes; a hinge that survives keeps its rest shape."""
 
     def __init__(self, positions: np.ndarray, triangles: np.ndarray, rigidity: float,
-                 fold_pairs: np.ndarray, previous: 'HingeBending | None' = None) -> None:
+                 fold_pairs: np.ndarray, previous: 'HingeBending | None' = None,
+                 keep_stiffness: bool = False) -> None:
         """``fold_pairs``: (F, 2) vertex pairs of AUX springs; a hinge whose opposite
         vertices are one of them is a fold. A hinge that ``previous`` had, with the same
         opposite vertices and fold state, keeps its weights, stiffness and rest curvature;
         any other is measured now (at reset, with no ``previous``: the rest shape; after
-        damage, a crease: CREASE_STIFFNESS_SHARE)."""
+        damage, a crease: CREASE_STIFFNESS_SHARE, unless ``keep_stiffness``: a copy of the
+        same mesh)."""
         vertex_count = positions.shape[0]
         self.quads = hinge_quads(triangles, vertex_count)
         count = self.quads.shape[0]
@@ -209,14 +244,15 @@ class HingeBending:
         hinge_rest_state(positions, self.quads, rigidity, self.weights, self.stiffness,
                          self.rest_curvature)
         if previous is not None and previous.quads.shape[0] and count:
-            self._carry_over(previous, vertex_count)
+            self._carry_over(previous, vertex_count, keep_stiffness)
         # a fold is a hinge that gave way: its AUX spring holds it (SPEC §4.2), it no
         # longer bends back
         self.stiffness[self.folded] = 0.0
         self._curved = np.flatnonzero(np.abs(self.rest_curvature).max(axis=1, initial=0.0)
                                       > FLAT_REST)
 
-    def _carry_over(self, previous: 'HingeBending', vertex_count: int) -> None:
+    def _carry_over(self, previous: 'HingeBending', vertex_count: int,
+                    keep_stiffness: bool) -> None:
         # a hinge is known by its edge; vertex indices never change and only grow, so
         # keys over the current vertex count identify the previous mesh's edges too
         old_key = edge_key(previous.quads[:, 0], previous.quads[:, 1], vertex_count)
@@ -230,7 +266,8 @@ class HingeBending:
         for name in ('weights', 'stiffness', 'rest_curvature'):
             getattr(self, name)[same] = getattr(previous, name)[match[same]]
         # a hinge damage made is a crease: its fibres are broken, it bends back weakly
-        self.stiffness[~same] *= CREASE_STIFFNESS_SHARE
+        if not keep_stiffness:
+            self.stiffness[~same] *= CREASE_STIFFNESS_SHARE
 
     def matrix_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, columns, values) [N/m] of Q = Σ k w wᵀ."""
@@ -244,6 +281,16 @@ class HingeBending:
         """The local step's bending part of the global step's right-hand side."""
         add_bending_targets(positions, self.quads, self.weights, self.stiffness,
                             self.rest_curvature, self._curved, rhs)
+
+    def yield_to(self, positions: np.ndarray, yield_curvature: float) -> int:
+        """Let the hinges bent beyond ``yield_curvature`` [1/m] keep the excess as their rest
+        shape (``yield_hinges``); returns how many did. The matrix does not change."""
+        yielded = int(yield_hinges(positions, self.quads, self.weights, self.stiffness,
+                                   self.rest_curvature, yield_curvature))
+        if yielded:
+            self._curved = np.flatnonzero(np.abs(self.rest_curvature).max(axis=1, initial=0.0)
+                                          > FLAT_REST)
+        return yielded
 
     def energy(self, positions: np.ndarray) -> float:
         """Σ ½ k |κ - R κ0|² [J]."""

@@ -183,6 +183,10 @@ class DamageConfig:
     (crumple) draws its l/l0 in [this, 1)."""
     crumple_fold_fraction: float = 0.5
     """Share of random-damage events that are folds rather than breaks."""
+    yield_curvature: float = 200.0
+    """Curvature beyond which bending sets (paper's plasticity: its fibres yield at about 1 %
+    strain, 2 ε / t for a 0.1 mm sheet) [1/m]; a hinge bent further than this from its rest
+    shape keeps the excess. 0: elastic ('constrained' solver only)."""
 
     def __post_init__(self) -> None:
         _require(isinstance(self.enabled, bool), f'enabled must be a bool, got {self.enabled!r}')
@@ -195,6 +199,7 @@ class DamageConfig:
                  and 0 <= self.fold_threshold < 1,
                  f'fold_threshold must be in [0, 1), got {self.fold_threshold!r}')
         _finite_positive('check_rate', self.check_rate)
+        _finite_non_negative('yield_curvature', self.yield_curvature)
         _require(self.check_rate <= 10000,
                  f'check_rate must be <= 10000 Hz, got {self.check_rate}')
         _require(isinstance(self.compression_floor, (int, float))

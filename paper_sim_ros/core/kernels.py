@@ -428,6 +428,30 @@ def excess_compression(positions, spring_vertices, rest_length, threshold):
 
 
 @njit(cache=True)
+def lift_squeezed(positions, inverse_mass, spring_vertices, rest_length, ground_height,
+                  threshold):
+    """Raise each free vertex lying on the table whose springs are squeezed by more than
+    ``threshold`` by the height that would give a spring of its compression c its length
+    back over a rise: l0 √(2c). A sheet pushed together on a table can only buckle up, and
+    a flat one has no out-of-plane motion for the solve to amplify."""
+    vertex_count = positions.shape[0]
+    squeeze = np.zeros(vertex_count)
+    reach = np.zeros(vertex_count)
+    for s in range(spring_vertices.shape[0]):
+        c = -_spring_strain(positions, spring_vertices, rest_length, s)
+        if c <= threshold:
+            continue
+        for end in range(2):
+            v = spring_vertices[s, end]
+            if c > squeeze[v]:
+                squeeze[v] = c
+                reach[v] = rest_length[s]
+    for v in range(vertex_count):
+        if squeeze[v] > 0.0 and inverse_mass[v] > 0.0 and positions[v, 2] <= ground_height:
+            positions[v, 2] = ground_height + reach[v] * np.sqrt(2.0 * squeeze[v])
+
+
+@njit(cache=True)
 def table_penetration(positions, ground_height):
     """Deepest any vertex sits below the table [m]."""
     deepest = 0.0
@@ -478,9 +502,10 @@ def accumulate_probe_compression(positions, normals, frame_motion, spring_vertic
     - any other probe pushes a vertex within ``reach`` × radius of its end centre by
       u = max(0, Δc · n) n (n: the contact normal).
     The spring (i, j) shortens by (u_i − u_j) · (x_j − x_i)/l, counted when > 0, over l0.
-    Where only one end is pushed, the other's u is how far it actually went over the frame
-    (``frame_motion``, in its tangent plane): sheet that gets out of the way ahead of a
-    probe, as a sheet dragged over the table does, relieves the push instead of taking it."""
+    Less the sheet's give: how much further apart the ends actually moved over the frame
+    (``frame_motion``) than the pushes alone would have put them. Sheet that gets out of
+    the way of a probe, as a sheet dragged over the table or sliding over a probe does,
+    relieves the push instead of taking it."""
     vertex_count = positions.shape[0]
     probe_count = probe_radius.shape[0]
     pinching = np.zeros(probe_count, dtype=np.bool_)
@@ -531,16 +556,6 @@ def accumulate_probe_compression(positions, normals, frame_motion, spring_vertic
         ux = push[i, 0] - push[j, 0]
         uy = push[i, 1] - push[j, 1]
         uz = push[i, 2] - push[j, 2]
-        if pushed[i] != pushed[j]:
-            free = j if pushed[i] else i
-            sign = 1.0 if pushed[i] else -1.0
-            mx = frame_motion[free, 0]
-            my = frame_motion[free, 1]
-            mz = frame_motion[free, 2]
-            across = mx * normals[free, 0] + my * normals[free, 1] + mz * normals[free, 2]
-            ux -= sign * (mx - across * normals[free, 0])
-            uy -= sign * (my - across * normals[free, 1])
-            uz -= sign * (mz - across * normals[free, 2])
         dx = positions[j, 0] - positions[i, 0]
         dy = positions[j, 1] - positions[i, 1]
         dz = positions[j, 2] - positions[i, 2]
@@ -548,5 +563,14 @@ def accumulate_probe_compression(positions, normals, frame_motion, spring_vertic
         if length < 1e-12:
             continue
         shortening = (ux * dx + uy * dy + uz * dz) / length
+        if shortening > 0.0:
+            # the way the sheet got out of the push: how much more the ends moved apart
+            # than the pushes alone would have them (never less: that is the push's own)
+            give = 0.0
+            for axis in range(3):
+                delta = (dx, dy, dz)[axis] / length
+                give += delta * ((frame_motion[j, axis] - push[j, axis])
+                                 - (frame_motion[i, axis] - push[i, axis]))
+            shortening -= max(0.0, give)
         if shortening > 0.0:
             compression[s] += shortening / rest_length[s]

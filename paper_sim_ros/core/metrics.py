@@ -38,7 +38,8 @@ def plane_deviation(positions: np.ndarray) -> float:
 def relax(simulator: Simulator, seconds: float = 3.0, air_damping: float = 3.0,
           jitter: float = 1e-9) -> Simulator:
     """A free, damped copy of ``simulator`` after ``seconds`` of relaxation: gravity,
-    table, probes and pins off, damage off (the damage already done stays in the mesh),
+    table, probes and pins off, damage off (the damage already done stays in the mesh, and
+    the bending rest shape, creases and plastic set included, is the original's),
     velocities zeroed, air drag ``air_damping`` [1/s]. The original is untouched.
 
     The vertices start displaced by a seeded random ``jitter`` [m] out of their plane: a
@@ -57,6 +58,7 @@ def relax(simulator: Simulator, seconds: float = 3.0, air_damping: float = 3.0,
     noise = np.random.default_rng([config.seed, 0x5E7]).uniform(-1.0, 1.0, sheet.vertex_count)
     sheet.positions += jitter * noise[:, None] * vertex_normals(sheet.positions, sheet.triangles)
     relaxed = Simulator(relaxed_config, initial_sheet=sheet)
+    relaxed.take_rest_shape(simulator)  # what the sheet remembers, not how it lies now
     for _ in range(int(round(seconds / config.solver.dt))):
         relaxed.step_frame()
     return relaxed

@@ -80,6 +80,18 @@ class Simulator:
             held_inextensible=self.config.solver.method == 'constrained')
         self.topology_changed()
 
+    def take_rest_shape(self, other: 'Simulator') -> None:
+        """Bend towards ``other``'s rest shape (its sheet's, creases and plastic set
+        included) instead of this sheet's current shape, for a copy of ``other``'s sheet."""
+        if self.config.solver.method != 'constrained' or other._bending is None:
+            return
+        sheet = self.sheet
+        self._bending = HingeBending(sheet.positions, sheet.triangles,
+                                     self.config.sheet.bending_rigidity,
+                                     sheet.spring_vertices[sheet.spring_kind == AUX],
+                                     other._bending, keep_stiffness=True)
+        self._factor_global_steps()
+
     def reconfigure(self, config: SimulationConfig) -> None:
         """Run on with new settings, the state untouched: contact and solver settings take
         effect at the next frame (what the solver derives from them is rebuilt); sheet
@@ -225,6 +237,10 @@ class Simulator:
             self.sheet.positions[:] = saved_positions
             self.sheet.velocities[:] = 0.0
         # damage: checked at its own rate in simulated time, never per sub-step
+        damage = self.config.damage
+        if (damage.enabled and damage.yield_curvature > 0 and solver.method == 'constrained'
+                and self._bending is not None):
+            self._bending.yield_to(self.sheet.positions, damage.yield_curvature)
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
                                self.sheet.positions - saved_positions):
             self.topology_changed()
@@ -268,6 +284,10 @@ class Simulator:
             if np.any(self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)):
                 carried |= touched
             inverse_mass = np.where(carried, 0.0, self._inverse_mass)
+            if self.config.contact.ground_enabled:
+                kernels.lift_squeezed(positions, inverse_mass, self._constraint_ends,
+                                      self._constraint_rest, self.config.contact.ground_height,
+                                      self.config.solver.buckling_compression)
             self._limit_strain(positions, start_positions, probe_from, probe_to, inverse_mass)
 
         # velocities from the positions actually reached
