@@ -472,7 +472,8 @@ class Simulator:
                                 np.einsum('va,va->v', normal, positions[contact])])
         self._row_kind = np.concatenate([np.full(3 * gripped.size, GRIP_ROW),
                                          np.full(contact.size, CONTACT_ROW)])
-        self._table_reaction[gripped] = 0.0  # held vertices are not the solve's to support
+        # what the probes hold is not the table's to support (nor, once let go, to launch)
+        self._table_reaction[vertex] = 0.0
         return vertex, direction, value
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
