@@ -200,6 +200,9 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'when |x_r - x_l| / d0 falls below this.', (0.0, 0.999), read_only=True),
     ParameterSpec('damage.max_vertices', _DAMAGE.max_vertices, 'Vertex cap: damage stops '
                   'there.', (9, 10000000), read_only=True),
+    ParameterSpec('damage.yield_curvature', _DAMAGE.yield_curvature, 'Curvature beyond '
+                  'which bending sets, as paper yields [1/m]; 0: elastic.', (0.0, 1.0e5),
+                  read_only=True),
     ParameterSpec('appearance.texture_path', _APPEARANCE.texture_path, 'Image file mapped '
                   "onto the sheet (any format Pillow reads); '': the procedural paper "
                   'texture.', read_only=True),

@@ -84,3 +84,27 @@ def test_damage_keeps_the_rest_shape_of_every_hinge_it_does_not_touch():
                for k, q in enumerate(map(tuple, bending.quads.tolist()))
                if q in kept and q in still]
     assert len(carried) > 0.8 * len(kept) and all(carried)
+
+
+@pytest.mark.parametrize('radius, sets', [(0.02, False), (0.002, True)])
+def test_bending_sets_only_beyond_the_yield_curvature(radius, sets):
+    """Paper's plasticity (a yield curvature of 200 /m): a sheet rolled to a 20 mm radius
+    (50 /m) keeps nothing; rolled to 2 mm (500 /m) it keeps the excess over the yield as
+    its rest shape, a cylinder of 1 / (500 - 200) m = 3.3 mm radius, so its bending energy
+    there is ½ B (200 /m)² per unit area, not ½ B (500 /m)²."""
+    config = SheetConfig(nx=33, ny=9, width=0.02, height=0.01)
+    sheet = build_flat_sheet(config)
+    rigidity = 4e-4
+    bending = HingeBending(sheet.positions, sheet.triangles, rigidity, NO_FOLDS)
+    x, y = sheet.material[:, 0], sheet.material[:, 1]
+    rolled = np.column_stack([radius * np.sin(x / radius), y, radius * (1 - np.cos(x / radius))])
+    elastic = bending.energy(rolled)
+    yielded = bending.yield_to(rolled, 200.0)
+    if not sets:
+        assert yielded == 0 and bending.energy(rolled) == elastic
+        assert bending.energy(sheet.positions) < 1e-20
+        return
+    assert yielded > 0.25 * len(bending.quads)  # those across the roll (not along it)
+    # what is left to spring back is the yield curvature's energy: (200 / 500)² of it
+    assert bending.energy(rolled) == pytest.approx(elastic * (200 / 500) ** 2, rel=0.15)
+    assert bending.energy(sheet.positions) > 0.5 * elastic * (300 / 500) ** 2  # flat: bent

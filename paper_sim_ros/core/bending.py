@@ -202,10 +202,10 @@ def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_cur
             continue
         _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
         edge_length = np.sqrt(max(np.sum(geometry[0] ** 2), 1e-300))
-        # (A_r + A_l) / (√3 |e|): the angle of a cylinder of unit curvature across this
-        # hinge, by the calibration of the stiffness k (hinge_rest_state)
+        # the mean height of its triangles over the edge, (A_r + A_l) / |e|: the angle a
+        # hinge across a cylinder of unit curvature takes (test_bending checks the energy)
         width = 0.5 * (np.sqrt(np.sum(geometry[1] ** 2))
-                       + np.sqrt(np.sum(geometry[2] ** 2))) / (np.sqrt(3.0) * edge_length)
+                       + np.sqrt(np.sum(geometry[2] ** 2))) / edge_length
         _curvature_in_frame(positions, quads, weights, h, frame, curvature)
         excess = 0.0
         for row in range(3):
