@@ -306,19 +306,26 @@ def test_core_imports_neither_rclpy_nor_rerun():
     assert result.stdout.strip() == '', f'the core imported {result.stdout.strip()}'
 
 
+def pinned_springs_system():
+    """A 9 × 9 sheet pinned along one edge and its HINGE springs' matrix entries."""
+    from paper_sim_ros.core.projective import spring_entries
+    sheet = build_flat_sheet(SheetConfig(nx=9, ny=9))
+    pinned = np.zeros(sheet.vertex_count, dtype=bool)
+    pinned[:9] = True
+    held = sheet.spring_kind == HINGE
+    return sheet, pinned, spring_entries(sheet.spring_vertices[held],
+                                         np.full(int(np.sum(held)), 200.0))
+
+
 def test_global_step_solves_its_system_with_pins():
     """The prefactored global step (core/projective.py) returns the exact solution of
     (M/h² + K) x = b over the free vertices, pinned couplings moved to b, for the springs'
     K = Σ k AᵀA and for the bending matrix Q (core/bending.py)."""
     import scipy.sparse as sparse
     from paper_sim_ros.core.bending import HingeBending
-    from paper_sim_ros.core.projective import GlobalStep, spring_entries
-    sheet = build_flat_sheet(SheetConfig(nx=9, ny=9))
+    from paper_sim_ros.core.projective import GlobalStep
+    sheet, pinned, springs = pinned_springs_system()
     vertex_count = sheet.vertex_count
-    pinned = np.zeros(vertex_count, dtype=bool)
-    pinned[:9] = True
-    held = sheet.spring_kind == HINGE
-    springs = spring_entries(sheet.spring_vertices[held], np.full(int(np.sum(held)), 200.0))
     bending = HingeBending(sheet.positions, sheet.triangles, 4e-4,
                            np.zeros((0, 2), dtype=np.int32)).matrix_entries()
     h = 1.0 / 60.0
@@ -341,13 +348,9 @@ def test_constrained_solve_equals_a_factor_with_the_vertices_held():
     """ConstrainedSolve (core/projective.py): rows holding some vertices where they are
     and others on a plane through them give, on the pins-only factor, what a factor with
     those vertices held gives (to round-off), and the plane rows are met exactly."""
-    from paper_sim_ros.core.projective import ConstrainedSolve, GlobalStep, spring_entries
-    sheet = build_flat_sheet(SheetConfig(nx=9, ny=9))
+    from paper_sim_ros.core.projective import ConstrainedSolve, GlobalStep
+    sheet, pinned, entries = pinned_springs_system()
     vertex_count = sheet.vertex_count
-    pinned = np.zeros(vertex_count, dtype=bool)
-    pinned[:9] = True
-    held = sheet.spring_kind == HINGE
-    entries = spring_entries(sheet.spring_vertices[held], np.full(int(np.sum(held)), 200.0))
     h = 1.0 / 60.0
     rng = np.random.default_rng(3)
     rhs = rng.normal(size=(vertex_count, 3))
