@@ -197,6 +197,10 @@ class ConstrainedSolve:
         self._columns = np.zeros((0, vertex_count))
         """Row c: z_v of the vertex whose ``_column_of`` is c (zero at pinned vertices)."""
         self._column_count = 0
+        self._factored_rows: tuple = ()
+        """The rows (vertex, direction arrays) whose S is factored in ``_lower``: the same
+        rows come back for every iteration of a sub-step."""
+        self._lower = np.zeros((0, 0))
 
     def _ensure_columns(self, vertices: np.ndarray) -> None:
         missing = np.unique(vertices[self._column_of[vertices] < 0])
@@ -230,50 +234,61 @@ class ConstrainedSolve:
             return np.zeros(0)
         self._ensure_columns(row_vertex)
         row_column = self._column_of[row_vertex]
+        rows = self._factored_rows
+        if not (rows and rows[0] is row_vertex and rows[1] is row_direction):
+            self._lower = np.empty((row_vertex.size, row_vertex.size))
+            _factor_rows(self._columns, row_vertex, row_column, row_direction, self._lower)
+            self._factored_rows = (row_vertex, row_direction)
         multipliers = np.empty(row_vertex.size)
-        _constrain(self._columns, row_vertex, row_column, row_direction, row_value,
-                   positions, multipliers)
+        _constrain(self._lower, self._columns, row_vertex, row_column, row_direction,
+                   row_value, positions, multipliers)
         return multipliers
 
 
 @njit(cache=True)
-def _constrain(columns, row_vertex, row_column, row_direction, row_value, positions,
-               multipliers):
-    """x ← x − Σ λᵣ dᵣ z_vᵣ with S λ = d · x₀ − c (ConstrainedSolve), S by Cholesky (it is
-    A⁻¹ seen through the rows: symmetric positive definite while no two rows of one vertex
-    are parallel). Deterministic: no BLAS."""
+def _factor_rows(columns, row_vertex, row_column, row_direction, lower):
+    """Cholesky factor G (lower triangle of ``lower``) of S = G Gᵀ, Sᵣₛ = (dᵣ · dₛ) z_vₛ[vᵣ]
+    (ConstrainedSolve): A⁻¹ seen through the rows, symmetric positive definite while no two
+    rows of one vertex are parallel. In numba, not BLAS: the same bits on any thread
+    count."""
     rows = row_vertex.shape[0]
-    system = np.empty((rows, rows))
     for r in range(rows):
-        multipliers[r] = (row_direction[r, 0] * positions[row_vertex[r], 0]
-                          + row_direction[r, 1] * positions[row_vertex[r], 1]
-                          + row_direction[r, 2] * positions[row_vertex[r], 2]) - row_value[r]
         for s in range(r + 1):
             alignment = (row_direction[r, 0] * row_direction[s, 0]
                          + row_direction[r, 1] * row_direction[s, 1]
                          + row_direction[r, 2] * row_direction[s, 2])
-            system[r, s] = alignment * columns[row_column[s], row_vertex[r]]
-    # Cholesky S = G Gᵀ in the lower triangle, then G Gᵀ λ = residual
+            lower[r, s] = alignment * columns[row_column[s], row_vertex[r]]
     for r in range(rows):
         for s in range(r + 1):
-            total = system[r, s]
+            total = lower[r, s]
             for k in range(s):
-                total -= system[r, k] * system[s, k]
+                total -= lower[r, k] * lower[s, k]
             if r == s:
-                system[r, r] = np.sqrt(max(total, 1e-300))
+                lower[r, r] = np.sqrt(max(total, 1e-300))
             else:
-                system[r, s] = total / system[s, s]
+                lower[r, s] = total / lower[s, s]
+
+
+@njit(cache=True)
+def _constrain(lower, columns, row_vertex, row_column, row_direction, row_value, positions,
+               multipliers):
+    """x ← x − Σ λᵣ dᵣ z_vᵣ with G Gᵀ λ = d · x₀ − c (ConstrainedSolve, ``_factor_rows``)."""
+    rows = row_vertex.shape[0]
+    for r in range(rows):
+        multipliers[r] = (row_direction[r, 0] * positions[row_vertex[r], 0]
+                          + row_direction[r, 1] * positions[row_vertex[r], 1]
+                          + row_direction[r, 2] * positions[row_vertex[r], 2]) - row_value[r]
     for r in range(rows):
         total = multipliers[r]
         for k in range(r):
-            total -= system[r, k] * multipliers[k]
-        multipliers[r] = total / system[r, r]
+            total -= lower[r, k] * multipliers[k]
+        multipliers[r] = total / lower[r, r]
     for step in range(rows):
         r = rows - 1 - step
         total = multipliers[r]
         for k in range(r + 1, rows):
-            total -= system[k, r] * multipliers[k]
-        multipliers[r] = total / system[r, r]
+            total -= lower[k, r] * multipliers[k]
+        multipliers[r] = total / lower[r, r]
     # one pass over the sheet per distinct column: the rows of a vertex add up first
     weight = np.zeros((columns.shape[0], 3))
     used = np.zeros(columns.shape[0], dtype=np.bool_)
