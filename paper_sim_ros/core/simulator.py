@@ -44,7 +44,7 @@ TABLE_ITERATIONS = 10
 sheet at rest on the table quivering (docs/solver.md)."""
 TABLE_TOLERANCE = 1e-6
 """Contact violation [m] at which the table's reaction counts as settled."""
-BUCKLING_PROGRESS = 0.01
+BUCKLING_PROGRESS = 0.05
 """The share of the springs' compression beyond ``buckling_compression`` an extra
 local/global iteration must take out for the next one to run (docs/solver.md)."""
 FAST_PROBE_TRAVEL = 0.25
