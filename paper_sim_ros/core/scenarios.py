@@ -80,7 +80,7 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
         }],
     },
     # two fingertips rest on the sheet 1 cm in from its short edges, pressed 3 mm into the
-    # (yielding) table, and slide towards each other by 30 % of the length (2 × 44.55 mm)
+    # table, and slide towards each other by 30 % of the length (2 × 44.55 mm)
     # in 2 s, then lift off
     'squeeze': {
         'description': 'A4 sheet flat on a table; two 1.5 cm probes rest on it near its short '
@@ -104,7 +104,7 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
         'contact': {'ground_enabled': True},
     },
     # a fingertip rests on the table 15 mm beside the sheet's short edge, pressed 1 mm into
-    # the (yielding) table, slides into the sheet and pushes it 10 cm along the table
+    # the table, slides into the sheet and pushes it 10 cm along the table
     'slide': {
         'description': 'A4 sheet flat on a table; a 1 cm fingertip rests on the table beside '
                        'its short edge, pressed 1 mm in, slides into the sheet and pushes it '
@@ -118,7 +118,7 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
                           [2.5, 0.0, -0.0485, 0.009], [3.0, 0.0, -0.0485, 0.05]],
         }],
     },
-    # a fingertip presses the sheet's middle 1 mm into the (yielding) table and drags it
+    # a fingertip presses the sheet's middle 1 mm into the table and drags it
     # 10 cm across the table (it grips better than the table: 0.6 against 0.4)
     'drag': {
         'description': 'A4 sheet flat on a table; a 1 cm fingertip presses its middle 1 mm '
