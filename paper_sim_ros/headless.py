@@ -8,19 +8,16 @@ Exit status 0 on success, 2 with a one-line reason on bad input, 130 when interr
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 import json
-import math
 import os
 import signal
 import sys
-from typing import Callable
 
-from .core import (BUILTIN_SCENARIOS, Simulator, build_simulator, check_metrics_path,
+from .core import (BUILTIN_SCENARIOS, build_simulator, check_metrics_path,
                    load_scenario, run_scenario, write_metrics)
-from .core.camera_rig import CameraRig
-from .rerun_logger import RerunRecorder, check_writable_rrd
+from .rerun_logger import check_writable_rrd
 from .rerun_replay import replay
+from .run_outputs import RunOutputs
 from .warmup import warm_up
 
 
@@ -53,29 +50,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _recording_callback(recorder: RerunRecorder, dt: float,
-                        with_cameras: bool) -> Callable[[Simulator, float, list], None]:
-    def log(simulator: Simulator, step_seconds: float, camera_frames: list) -> None:
-        recorder.log_frame(simulator.time, simulator, scalars={
-            'step_time': step_seconds,
-            'real_time_factor': dt / step_seconds if step_seconds > 0 else 0.0,
-            'energy': simulator.energy(),
-            'max_strain': simulator.max_strain(),
-        })
-        for camera, frame in camera_frames if with_cameras else ():
-            recorder.log_camera(simulator.time, simulator, camera.config, frame)
-    return log
-
-
-def _scenario_cameras(scenario, camera_rate: float | None) -> tuple:
-    """The scenario's cameras, each at ``camera_rate`` when given."""
-    if camera_rate is None:
-        return scenario.cameras
-    if not (math.isfinite(camera_rate) and camera_rate >= 0):
-        raise ValueError(f'--camera-rate must be finite and >= 0 Hz, got {camera_rate}')
-    return tuple(replace(camera, rate=camera_rate) for camera in scenario.cameras)
-
-
 def _raise_keyboard_interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
@@ -101,8 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.replay:
         return replay_command(args)
-    recorder = None
-    bag = None
+    outputs = None
     # from here on SIGTERM unwinds like Ctrl-C, so a recording is always closed
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     try:
@@ -112,61 +85,23 @@ def main(argv: list[str] | None = None) -> int:
                                  damage_enabled=False if args.no_damage else None)
         simulator = build_simulator(scenario)
         check_metrics_path(args.metrics_json)
-        if args.camera_rate is not None and not (args.bag or args.rrd):
-            raise ValueError('--camera-rate is the rate of the cameras in --bag or --rrd; '
-                             'give one')
-        recorded_cameras = args.bag or args.camera_rate is not None
-        rig = CameraRig(_scenario_cameras(scenario, args.camera_rate) if recorded_cameras
-                        else (), scenario.appearance, simulator, scenario.config.seed)
-        outputs: list[Callable[[Simulator, float, list], None]] = []
-        if args.rrd:
-            with_cameras = args.camera_rate is not None
-            recorder = RerunRecorder('paper_sim_headless', path=args.rrd,
-                                     recording_info={'scenario': scenario.mapping},
-                                     appearance=scenario.appearance,
-                                     cameras=tuple(camera.config.name for camera in rig.cameras)
-                                     if with_cameras else ())
-            outputs.append(_recording_callback(recorder, scenario.config.solver.dt,
-                                               with_cameras))
-        if args.bag:
-            # only a bag needs the ROS message packages
-            from .headless_bag import HeadlessBag
-            bag = HeadlessBag(args.bag, rig.cameras)
-            outputs.append(lambda simulator, step_seconds, frames: bag.on_frame(simulator,
-                                                                                frames))
+        outputs = RunOutputs(scenario, simulator, rrd=args.rrd, bag=args.bag,
+                             camera_rate=args.camera_rate)
     except (ValueError, OSError) as error:
-        _close(recorder, bag)
         return _error(error)
     except KeyboardInterrupt:
-        _close(recorder, bag)
+        if outputs is not None:
+            outputs.close()
         return _interrupted()
     try:
         warm_up()
-        metrics = run_scenario(
-            scenario, simulator=simulator,
-            on_frame=lambda simulator, seconds: _each_output(outputs, simulator, seconds,
-                                                             rig))
+        metrics = run_scenario(scenario, simulator=simulator, on_frame=outputs.on_frame)
     except KeyboardInterrupt:
         return _interrupted()
     finally:
-        _close(recorder, bag)
+        outputs.close()
     emit_metrics(metrics, args.metrics_json)
     return 0
-
-
-def _each_output(outputs: list, simulator: Simulator, step_seconds: float,
-                 rig: CameraRig) -> None:
-    if outputs:
-        frames = rig.due_frames(simulator)  # each camera rendered once for all outputs
-        for output in outputs:
-            output(simulator, step_seconds, frames)
-
-
-def _close(*outputs) -> None:
-    """Close whatever recordings were opened, so that each is complete."""
-    for output in outputs:
-        if output is not None:
-            output.close()
 
 
 def replay_command(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ import json
 import os
 from pathlib import Path
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -353,11 +354,17 @@ def test_headless_interrupted_recording_is_complete_and_replayable(tmp_path, sig
 
 # ---------------------------------------------------------------------------- streaming
 def _free_port() -> int:
-    import socket
-
     with socket.socket() as probe:
         probe.bind(('127.0.0.1', 0))
         return probe.getsockname()[1]
+
+
+def _accepts_connections(port: int) -> bool:
+    try:
+        with socket.create_connection(('127.0.0.1', port), timeout=1.0):
+            return True
+    except OSError:
+        return False
 
 
 def test_streams_to_a_running_rerun_server(tmp_path):
@@ -372,7 +379,11 @@ def test_streams_to_a_running_rerun_server(tmp_path):
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                               start_new_session=True)
     try:
-        time.sleep(2.0)
+        # listening: on a loaded machine the server takes more than the 2 s it usually does
+        deadline = time.monotonic() + 60
+        while not _accepts_connections(port) and time.monotonic() < deadline:
+            assert server.poll() is None, server.stderr.read().decode()[-2000:]
+            time.sleep(0.2)
         assert server.poll() is None, server.stderr.read().decode()[-2000:]
         scenario = scenario_from_mapping({**PINCH, 'duration': 0.2})
         simulator = build_simulator(scenario)
