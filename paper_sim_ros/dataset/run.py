@@ -1,0 +1,101 @@
+"""One run, on a worker: the resolved scenario through the headless runner's run path
+(``core.load_scenario``, ``core.run_scenario``, ``headless_bag.HeadlessBag``, the headless
+runner's Rerun recording), its outputs written to a local temporary folder, checked, and
+handed back as bytes: the worker may be on another machine than the dataset's folder.
+
+A run's outputs are those of ``paper_sim_headless --scenario runs/<id>/scenario.yaml
+--metrics-json ... [--bag ...] [--rrd ...]``: the same final positions, to the bit.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import os
+import tempfile
+import time
+
+import yaml
+
+from ..core import build_simulator, load_scenario, run_scenario, write_metrics
+from ..headless import _recording_callback as headless_recording_callback
+from ..headless_bag import HeadlessBag
+from ..rerun_logger import RerunRecorder
+from .outputs import (BAG_DIR, METRICS_FILE, RRD_FILE, SCENARIO_FILE, output_problem,
+                      read_tree)
+from .spec import Outputs, RunRequest
+
+TEST_PID_DIR_ENV = 'PAPER_SIM_DATASET_TEST_PID_DIR'
+"""For tests only: a folder where each run, as it starts, leaves ``<id>.<pid>.pid`` and, on
+its first attempt, waits ``TEST_HOLD_S``, so that a test can kill its worker mid-run. The
+driver reads it from its environment and hands it to the runs (``run_batch``)."""
+TEST_HOLD_S = 2.0
+
+
+@dataclass(frozen=True)
+class RunResult:
+    id: str
+    status: str
+    """'ok', or 'failed' (the scenario was refused; ``reason`` says why)."""
+    wall_s: float
+    """Seconds the run took on its worker, outputs written and checked."""
+    metrics: dict | None = None
+    files: dict[str, bytes] | None = None
+    """The run's folder, by relative path (``outputs.read_tree``)."""
+    reason: str | None = None
+
+
+def execute_run(request: RunRequest, outputs: Outputs, test_pid_dir: str | None) -> RunResult:
+    """Run ``request`` and return its outputs. A scenario that ``load_scenario`` refuses
+    (``ValueError``) is a failed run at once: trying again cannot help. Anything else that
+    goes wrong raises, and the batch retries it."""
+    started = time.perf_counter()
+    if test_pid_dir:
+        _announce_for_tests(test_pid_dir, request.id)
+    with tempfile.TemporaryDirectory(prefix='paper_sim_run_') as directory:
+        try:
+            metrics = produce(request, outputs, directory)
+        except ValueError as error:
+            return RunResult(request.id, 'failed', time.perf_counter() - started,
+                             reason=f'scenario refused: {error}')
+        problem = output_problem(directory, outputs)
+        if problem:
+            raise RuntimeError(f'run {request.id} wrote incomplete outputs: {problem}')
+        files = read_tree(directory)
+    return RunResult(request.id, 'ok', time.perf_counter() - started, metrics, files)
+
+
+def produce(request: RunRequest, outputs: Outputs, directory: str) -> dict:
+    """Run the scenario of ``request``, writing its outputs into ``directory``; the metrics.
+    Raises ``ValueError`` for a scenario that cannot be loaded or a bag that cannot be
+    written."""
+    scenario = load_scenario(request.scenario)
+    with open(os.path.join(directory, SCENARIO_FILE), 'w', encoding='utf-8') as stream:
+        yaml.safe_dump(request.scenario, stream, sort_keys=False)
+    simulator = build_simulator(scenario)
+    callbacks = []
+    recorder = bag = None
+    try:
+        if outputs.rrd:
+            recorder = RerunRecorder('paper_sim_dataset', path=os.path.join(directory, RRD_FILE),
+                                     recording_info={'scenario': scenario.mapping},
+                                     appearance=scenario.appearance)
+            callbacks.append(headless_recording_callback(recorder, scenario.config.solver.dt))
+        if outputs.bag:
+            bag = HeadlessBag(os.path.join(directory, BAG_DIR), scenario, simulator, None)
+            callbacks.append(lambda simulator, seconds: bag.on_frame(simulator))
+        metrics = run_scenario(scenario, simulator=simulator,
+                               on_frame=lambda simulator, seconds: [
+                                   callback(simulator, seconds) for callback in callbacks])
+    finally:
+        for output in (recorder, bag):
+            if output is not None:
+                output.close()
+    write_metrics(metrics, os.path.join(directory, METRICS_FILE))
+    return metrics
+
+
+def _announce_for_tests(pid_dir: str, run_id: str) -> None:
+    first_attempt = not any(name.startswith(f'{run_id}.') for name in os.listdir(pid_dir))
+    with open(os.path.join(pid_dir, f'{run_id}.{os.getpid()}.pid'), 'w') as stream:
+        stream.write(str(os.getpid()))
+    if first_attempt:
+        time.sleep(TEST_HOLD_S)
