@@ -319,6 +319,28 @@ def test_an_interrupted_batch_resumes_with_only_its_unfinished_runs(reference, t
 
 
 @pytest.mark.slow
+def test_sigterm_stops_a_batch_as_ctrl_c_does(tmp_path, ray_env):
+    """ray.init makes SIGTERM exit at once; a batch stopped by a scheduler or a CI timeout
+    still cancels its runs and leaves its manifest."""
+    pid_dir = tmp_path / 'pids'
+    pid_dir.mkdir()
+    out = tmp_path / 'out'
+    env = {**ray_env, 'TMPDIR': str(tmp_path), TEST_PID_DIR_ENV: str(pid_dir)}
+    batch = subprocess.Popen(dataset_command(write_spec(tmp_path, SPEC), out, '--workers', '1'),
+                             env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                             text=True)
+    try:
+        wait_for(lambda: any(pid_dir.iterdir()), BATCH_TIMEOUT_S, 'a run to start', batch)
+        batch.terminate()
+        output, _ = batch.communicate(timeout=60)
+    finally:
+        batch.kill()
+    assert batch.returncode == 130, output
+    assert [record['status'] for record in read_manifest(str(out))] == ['pending'] * 8
+    assert 'ok 0, failed 0, pending 8' in output and finished_runs(out) == set()
+
+
+@pytest.mark.slow
 def test_a_killed_worker_is_retried_and_a_bad_scenario_is_recorded(tmp_path, ray_env):
     (tmp_path / 'bad.yaml').write_text(yaml.safe_dump({'duration': 1.0, 'colour': 'red'}))
     spec = write_spec(tmp_path, {

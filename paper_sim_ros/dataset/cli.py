@@ -88,6 +88,8 @@ def main(argv: list[str] | None = None) -> int:
     if todo:
         try:
             cluster = connect(args.address, args.workers)
+            # ray.init makes SIGTERM exit the process at once: take it back
+            signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
         except KeyboardInterrupt:
             ray.shutdown()
             return 130
