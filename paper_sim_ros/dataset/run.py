@@ -15,7 +15,8 @@ import time
 
 import yaml
 
-from ..core import build_simulator, load_scenario, run_scenario, write_metrics
+from ..core import (Scenario, Simulator, build_simulator, load_scenario, run_scenario,
+                    write_metrics)
 from ..headless import _recording_callback as headless_recording_callback
 from ..headless_bag import HeadlessBag
 from ..rerun_logger import RerunRecorder
@@ -44,18 +45,22 @@ class RunResult:
 
 
 def execute_run(request: RunRequest, outputs: Outputs, test_pid_dir: str | None) -> RunResult:
-    """Run ``request`` and return its outputs. A scenario that ``load_scenario`` refuses
-    (``ValueError``) is a failed run at once: trying again cannot help. Anything else that
-    goes wrong raises, and the batch retries it."""
+    """Run ``request`` and return its outputs. A scenario that cannot be loaded or built
+    (``ValueError``: an unknown key, a value out of range) is a failed run at once: trying
+    again cannot help. Anything else that goes wrong raises, and the batch retries it."""
     started = time.perf_counter()
     if test_pid_dir:
         _announce_for_tests(test_pid_dir, request.id)
+    try:
+        scenario = load_scenario(request.scenario)
+        simulator = build_simulator(scenario)
+    except ValueError as error:
+        return RunResult(request.id, 'failed', time.perf_counter() - started,
+                         reason=f'scenario refused: {error}')
     with tempfile.TemporaryDirectory(prefix='paper_sim_run_') as directory:
-        try:
-            metrics = produce(request, outputs, directory)
-        except ValueError as error:
-            return RunResult(request.id, 'failed', time.perf_counter() - started,
-                             reason=f'scenario refused: {error}')
+        with open(os.path.join(directory, SCENARIO_FILE), 'w', encoding='utf-8') as stream:
+            yaml.safe_dump(request.scenario, stream, sort_keys=False)
+        metrics = produce(scenario, simulator, outputs, directory)
         problem = output_problem(directory, outputs)
         if problem:
             raise RuntimeError(f'run {request.id} wrote incomplete outputs: {problem}')
@@ -63,14 +68,9 @@ def execute_run(request: RunRequest, outputs: Outputs, test_pid_dir: str | None)
     return RunResult(request.id, 'ok', time.perf_counter() - started, metrics, files)
 
 
-def produce(request: RunRequest, outputs: Outputs, directory: str) -> dict:
-    """Run the scenario of ``request``, writing its outputs into ``directory``; the metrics.
-    Raises ``ValueError`` for a scenario that cannot be loaded or a bag that cannot be
-    written."""
-    scenario = load_scenario(request.scenario)
-    with open(os.path.join(directory, SCENARIO_FILE), 'w', encoding='utf-8') as stream:
-        yaml.safe_dump(request.scenario, stream, sort_keys=False)
-    simulator = build_simulator(scenario)
+def produce(scenario: Scenario, simulator: Simulator, outputs: Outputs, directory: str) -> dict:
+    """Run ``scenario`` on ``simulator`` (fresh from ``build_simulator``), writing the
+    outputs wanted into ``directory``; the metrics."""
     callbacks = []
     recorder = bag = None
     try:
@@ -78,6 +78,8 @@ def produce(request: RunRequest, outputs: Outputs, directory: str) -> dict:
             recorder = RerunRecorder('paper_sim_dataset', path=os.path.join(directory, RRD_FILE),
                                      recording_info={'scenario': scenario.mapping},
                                      appearance=scenario.appearance)
+            # the headless runner's frame logging: a dataset's recording is the one
+            # paper_sim_headless --rrd makes
             callbacks.append(headless_recording_callback(recorder, scenario.config.solver.dt))
         if outputs.bag:
             bag = HeadlessBag(os.path.join(directory, BAG_DIR), scenario, simulator, None)
