@@ -23,7 +23,7 @@ from .run import TEST_PID_DIR_ENV, RunResult, execute_run
 from .spec import Outputs, RunRequest
 
 WAIT_S = 0.5
-"""How often the driver collects finished runs and redraws the progress bar."""
+"""How often the driver redraws the progress bar while no run finishes."""
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,10 @@ def run_batch(requests: list[RunRequest], runs_dir: str, outputs: Outputs, max_r
     progress.start()
     try:
         while pending:
-            ready, _ = ray.wait(list(pending), num_returns=len(pending), timeout=WAIT_S)
+            # the first run to finish at once, with every other finished by then
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=WAIT_S)
+            if ready:
+                ready, _ = ray.wait(list(pending), num_returns=len(pending), timeout=0)
             for ref in ready:
                 request = pending.pop(ref)
                 record = _finish(ref, request, runs_dir, outputs, max_retries)
