@@ -120,14 +120,17 @@ def main(argv: list[str] | None = None) -> int:
 
 def resume_records(requests: list[RunRequest], runs_dir: str, outputs: Outputs) -> dict:
     """The manifest record of each run, by id in the spec's order: the stored one of a run
-    whose folder is complete, else 'pending' (an incomplete folder is removed, and said)."""
+    whose folder is complete (how this spec names it: another spec may have asked for the
+    same run), else 'pending' (an incomplete folder is removed, and said)."""
     remove_partials(runs_dir)
     records = {}
     for request in requests:
         record, problem = completed_record(runs_dir, request.id, outputs)
         if problem:
             print(f'redoing {request.id}: {problem}')
-        records[request.id] = record or run_record(request, 'pending')
+        pending = run_record(request, 'pending')
+        records[request.id] = pending if record is None else {
+            **record, **{key: pending[key] for key in ('scenario', 'source', 'parameters')}}
     return records
 
 
