@@ -30,10 +30,12 @@ import pytest
 from rosbags.rosbag2 import Reader
 import yaml
 
-from paper_sim_ros.dataset.manifest import read_manifest
+from paper_sim_ros.dataset.manifest import read_manifest, run_record
+from paper_sim_ros.dataset.outputs import (close_destination, completed_record,
+                                           open_destination, write_run)
 from paper_sim_ros.dataset.progress import Progress
-from paper_sim_ros.dataset.run import TEST_PID_DIR_ENV
-from paper_sim_ros.dataset.spec import expand, load_spec, run_id, spec_from_mapping
+from paper_sim_ros.dataset.run import TEST_PID_DIR_ENV, execute_run
+from paper_sim_ros.dataset.spec import Outputs, expand, load_spec, run_id, spec_from_mapping
 from paper_sim_ros.headless import main as headless_main
 from paper_sim_ros.rerun_replay import is_complete
 
@@ -211,6 +213,37 @@ def test_progress_is_a_bar_on_a_terminal_and_lines_in_a_log():
         else:
             assert '\r' not in text and text.splitlines()[0].startswith('ok     run a  [1/3')
             assert text.splitlines()[1].startswith('FAILED run b: why  [2/3')
+
+
+@pytest.mark.parametrize('shared', [True, False],
+                         ids=['worker beside the dataset', 'worker on another machine'])
+def test_a_run_publishes_its_folder_or_sends_it_back(tmp_path, shared):
+    """Without Ray: a worker that sees the batch's mark writes the run's folder into the
+    dataset; one that does not (on another machine) returns the files, which the driver
+    writes. Either way the folder is complete."""
+    runs_dir = tmp_path / 'runs'
+    runs_dir.mkdir()
+    destination = open_destination(str(runs_dir))
+    if not shared:  # a worker elsewhere does not see the mark
+        close_destination(destination)
+    outputs = Outputs(bag=True, rrd=True)
+    request = expand(spec_from_mapping({
+        'scenarios': ['press'], 'sweep': {'grid': 9, 'duration': 0.2, 'cameras': [[CAMERA]]},
+        'outputs': {'bag': True, 'rrd': True}}, str(tmp_path)))[0][0]
+    result = execute_run(request, outputs, destination, None)
+    assert result.status == 'ok' and result.in_place == shared
+    assert (result.files is None) == shared
+    if not shared:
+        assert set(result.files) >= {'scenario.yaml', 'metrics.json', 'recording.rrd'}
+        assert not (runs_dir / request.id).exists()
+        write_run(str(runs_dir), request.id, result.files,
+                  run_record(request, 'ok', outputs=outputs, wall_s=result.wall_s,
+                             metrics=result.metrics))
+    record, problem = completed_record(str(runs_dir), request.id, outputs)
+    assert problem == '' and record['metrics'] == result.metrics
+    assert record['wall_s'] == result.wall_s
+    assert sorted(path.name for path in runs_dir.iterdir()) == sorted(
+        [request.id] + ([destination.marker] if shared else []))
 
 
 # ----------------------------------------------------------------------------- on Ray

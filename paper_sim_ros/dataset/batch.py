@@ -1,10 +1,12 @@
 """The runs of a dataset as Ray tasks, one CPU each, on a local Ray instance or a cluster.
 
-Each run is a task (``run.execute_run``) that returns its outputs as bytes; the driver alone
-writes the dataset's folder, so workers on other machines need no shared file system, and a
-run's folder appears whole or not at all (``outputs.write_run``). Ray retries a task whose
-worker died (killed, out of memory, its node lost) or that raised, up to ``max_retries``
-times; a run still failing then is recorded as failed with the reason, and the batch goes on.
+Each run is a task (``run.execute_run``). A worker on the driver's machine (or sharing its
+file system at the same path) writes the run's folder into the dataset itself; one elsewhere
+returns the outputs as bytes and the driver writes them, so a cluster needs no shared file
+system. Either way a run's folder appears whole or not at all (``outputs.publish``). Ray
+retries a task whose worker died (killed, out of memory, its node lost) or that raised, up
+to ``max_retries`` times; a run still failing then is recorded as failed with the reason,
+and the batch goes on.
 """
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import ray
 from ray.exceptions import RayError, RayTaskError
 
 from .manifest import run_record
-from .outputs import write_run
+from .outputs import close_destination, open_destination, write_run
 from .progress import Progress
 from .run import TEST_PID_DIR_ENV, RunResult, execute_run
 from .spec import Outputs, RunRequest
@@ -54,7 +56,9 @@ def run_batch(requests: list[RunRequest], runs_dir: str, outputs: Outputs, max_r
     (KeyboardInterrupt: the runs not finished are cancelled; the finished ones are kept)."""
     task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=True)(execute_run)
     test_pid_dir = os.environ.get(TEST_PID_DIR_ENV)
-    pending = {task.remote(request, outputs, test_pid_dir): request for request in requests}
+    destination = open_destination(runs_dir)
+    pending = {task.remote(request, outputs, destination, test_pid_dir): request
+               for request in requests}
     progress.start()
     try:
         while pending:
@@ -76,6 +80,7 @@ def run_batch(requests: list[RunRequest], runs_dir: str, outputs: Outputs, max_r
         return False
     finally:
         progress.close()
+        close_destination(destination)
     return True
 
 
@@ -96,7 +101,8 @@ def _finish(ref: ray.ObjectRef, request: RunRequest, runs_dir: str, outputs: Out
         return run_record(request, 'failed', wall_s=result.wall_s, reason=result.reason)
     record = run_record(request, 'ok', outputs=outputs, wall_s=result.wall_s,
                         metrics=result.metrics)
-    write_run(runs_dir, request.id, result.files, record)
+    if not result.in_place:
+        write_run(runs_dir, request.id, result.files, record)
     return record
 
 

@@ -8,15 +8,19 @@
 
 A folder is complete only when every file wanted reads back (``output_problem``): a folder
 that is merely there may be the remains of a machine that died while writing. Folders are
-written whole under a temporary name and renamed (``write_run``), so a complete folder never
-stands beside a half-written one of the same name.
+written whole under a temporary name and renamed (``publish``), so a complete folder never
+stands beside a half-written one of the same name. A worker that shares the driver's file
+system writes its run's folder itself; any other sends the files back and the driver writes
+them (``Destination``, ``write_run``).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import json
 import os
 import shutil
 import tempfile
+import uuid
 
 import yaml
 from rosbags.rosbag2 import Reader
@@ -30,6 +34,7 @@ BAG_DIR = 'bag'
 RRD_FILE = 'recording.rrd'
 RECORD_FILE = 'run.json'
 PARTIAL_PREFIX = '.partial-'
+BATCH_MARKER_PREFIX = '.batch-'
 
 
 def output_files(outputs: Outputs) -> dict[str, str]:
@@ -93,16 +98,41 @@ def read_tree(directory: str) -> dict[str, bytes]:
     return files
 
 
-def write_run(runs_dir: str, run_id: str, files: dict[str, bytes], record: dict) -> None:
-    """Write a run's folder ``runs_dir/run_id`` whole: its files, then ``run.json``
-    (``record`` without its metrics, which are in metrics.json), under a temporary name
+@dataclass(frozen=True)
+class Destination:
+    """Where the runs' folders go: ``runs_dir`` (absolute) on the driver's machine, and
+    ``marker``, a file the driver made in it for this batch. A worker that sees the marker
+    shares the driver's file system (the same machine, or a shared mount at the same path)
+    and writes its run's folder in place; one that does not sends it back through Ray."""
+
+    runs_dir: str
+    marker: str
+
+    def shared(self) -> bool:
+        return os.path.isfile(os.path.join(self.runs_dir, self.marker))
+
+
+def open_destination(runs_dir: str) -> Destination:
+    """Mark ``runs_dir`` for a batch (``close_destination`` removes the mark)."""
+    marker = f'{BATCH_MARKER_PREFIX}{uuid.uuid4().hex}'
+    with open(os.path.join(runs_dir, marker), 'w', encoding='utf-8'):
+        pass
+    return Destination(os.path.abspath(runs_dir), marker)
+
+
+def close_destination(destination: Destination) -> None:
+    os.remove(os.path.join(destination.runs_dir, destination.marker))
+
+
+def new_partial(runs_dir: str, run_id: str) -> str:
+    """A new temporary folder for run ``run_id`` in ``runs_dir``, to be ``publish``ed."""
+    return tempfile.mkdtemp(prefix=f'{PARTIAL_PREFIX}{run_id}-', dir=runs_dir)
+
+
+def publish(partial: str, runs_dir: str, run_id: str, record: dict) -> None:
+    """Make the complete outputs in ``partial`` the folder of run ``run_id``: ``run.json``
+    (``record`` without its metrics, which are in metrics.json) written last, the folder
     renamed into place; an earlier incomplete folder of the run is replaced."""
-    partial = tempfile.mkdtemp(prefix=f'{PARTIAL_PREFIX}{run_id}-', dir=runs_dir)
-    for relative, data in files.items():
-        path = os.path.join(partial, relative)
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        with open(path, 'wb') as stream:
-            stream.write(data)
     stored = {key: value for key, value in record.items() if key != 'metrics'}
     with open(os.path.join(partial, RECORD_FILE), 'w', encoding='utf-8') as stream:
         stream.write(json.dumps(stored, indent=1) + '\n')
@@ -110,6 +140,18 @@ def write_run(runs_dir: str, run_id: str, files: dict[str, bytes], record: dict)
     if os.path.exists(final):
         shutil.rmtree(final)
     os.rename(partial, final)
+
+
+def write_run(runs_dir: str, run_id: str, files: dict[str, bytes], record: dict) -> None:
+    """Write the folder of run ``run_id`` from its files as ``read_tree`` read them on a
+    worker elsewhere, and ``publish`` it."""
+    partial = new_partial(runs_dir, run_id)
+    for relative, data in files.items():
+        path = os.path.join(partial, relative)
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        with open(path, 'wb') as stream:
+            stream.write(data)
+    publish(partial, runs_dir, run_id, record)
 
 
 def completed_record(runs_dir: str, run_id: str, outputs: Outputs) -> tuple[dict | None, str]:
@@ -135,9 +177,11 @@ def completed_record(runs_dir: str, run_id: str, outputs: Outputs) -> tuple[dict
     return record, ''
 
 
-def remove_partials(runs_dir: str) -> int:
-    """Remove the temporary folders of runs whose writing was cut short; how many."""
-    names = [name for name in os.listdir(runs_dir) if name.startswith(PARTIAL_PREFIX)]
-    for name in names:
-        shutil.rmtree(os.path.join(runs_dir, name))
-    return len(names)
+def remove_partials(runs_dir: str) -> None:
+    """Remove what batches that were cut short left: runs' temporary folders, marks."""
+    for name in os.listdir(runs_dir):
+        path = os.path.join(runs_dir, name)
+        if name.startswith(PARTIAL_PREFIX):
+            shutil.rmtree(path)
+        elif name.startswith(BATCH_MARKER_PREFIX):
+            os.remove(path)

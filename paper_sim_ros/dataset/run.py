@@ -1,7 +1,8 @@
 """One run, on a worker: the resolved scenario through the headless runner's run path
 (``core.load_scenario``, ``core.run_scenario``, ``headless_bag.HeadlessBag``, the headless
-runner's Rerun recording), its outputs written to a local temporary folder, checked, and
-handed back as bytes: the worker may be on another machine than the dataset's folder.
+runner's Rerun recording), its outputs written to a temporary folder and checked. A worker
+that shares the driver's file system then renames that folder into the dataset; one on
+another machine hands the files back as bytes (``outputs.Destination``).
 
 A run's outputs are those of ``paper_sim_headless --scenario runs/<id>/scenario.yaml
 --metrics-json ... [--bag ...] [--rrd ...]``: the same final positions, to the bit.
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import os
+import shutil
 import tempfile
 import time
 
@@ -20,8 +22,9 @@ from ..core import (Scenario, Simulator, build_simulator, load_scenario, run_sce
 from ..headless import _recording_callback as headless_recording_callback
 from ..headless_bag import HeadlessBag
 from ..rerun_logger import RerunRecorder
-from .outputs import (BAG_DIR, METRICS_FILE, RRD_FILE, SCENARIO_FILE, output_problem,
-                      read_tree)
+from .manifest import run_record
+from .outputs import (BAG_DIR, METRICS_FILE, RRD_FILE, SCENARIO_FILE, Destination,
+                      new_partial, output_problem, publish, read_tree)
 from .spec import Outputs, RunRequest
 
 TEST_PID_DIR_ENV = 'PAPER_SIM_DATASET_TEST_PID_DIR'
@@ -40,14 +43,19 @@ class RunResult:
     """Seconds the run took on its worker, outputs written and checked."""
     metrics: dict | None = None
     files: dict[str, bytes] | None = None
-    """The run's folder, by relative path (``outputs.read_tree``)."""
+    """The run's folder, by relative path (``outputs.read_tree``), unless ``in_place``."""
+    in_place: bool = False
+    """The worker published the run's folder in the dataset itself."""
     reason: str | None = None
 
 
-def execute_run(request: RunRequest, outputs: Outputs, test_pid_dir: str | None) -> RunResult:
-    """Run ``request`` and return its outputs. A scenario that cannot be loaded or built
-    (``ValueError``: an unknown key, a value out of range) is a failed run at once: trying
-    again cannot help. Anything else that goes wrong raises, and the batch retries it."""
+def execute_run(request: RunRequest, outputs: Outputs, destination: Destination,
+                test_pid_dir: str | None) -> RunResult:
+    """Run ``request``: its folder published in ``destination`` when the worker shares the
+    driver's file system, else its files returned. A scenario that cannot be loaded or
+    built (``ValueError``: an unknown key, a value out of range) is a failed run at once:
+    trying again cannot help. Anything else that goes wrong raises, and the batch retries
+    it."""
     started = time.perf_counter()
     if test_pid_dir:
         _announce_for_tests(test_pid_dir, request.id)
@@ -57,15 +65,24 @@ def execute_run(request: RunRequest, outputs: Outputs, test_pid_dir: str | None)
     except ValueError as error:
         return RunResult(request.id, 'failed', time.perf_counter() - started,
                          reason=f'scenario refused: {error}')
-    with tempfile.TemporaryDirectory(prefix='paper_sim_run_') as directory:
+    in_place = destination.shared()
+    directory = (new_partial(destination.runs_dir, request.id) if in_place
+                 else tempfile.mkdtemp(prefix='paper_sim_run_'))
+    try:
         with open(os.path.join(directory, SCENARIO_FILE), 'w', encoding='utf-8') as stream:
             yaml.safe_dump(request.scenario, stream, sort_keys=False)
         metrics = produce(scenario, simulator, outputs, directory)
         problem = output_problem(directory, outputs)
         if problem:
             raise RuntimeError(f'run {request.id} wrote incomplete outputs: {problem}')
-        files = read_tree(directory)
-    return RunResult(request.id, 'ok', time.perf_counter() - started, metrics, files)
+        wall_s = time.perf_counter() - started
+        if not in_place:
+            return RunResult(request.id, 'ok', wall_s, metrics, files=read_tree(directory))
+        publish(directory, destination.runs_dir, request.id,
+                run_record(request, 'ok', outputs=outputs, wall_s=wall_s, metrics=metrics))
+        return RunResult(request.id, 'ok', wall_s, metrics, in_place=True)
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)  # gone already once published
 
 
 def produce(scenario: Scenario, simulator: Simulator, outputs: Outputs, directory: str) -> dict:
