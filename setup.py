@@ -7,7 +7,8 @@ package_name = 'paper_sim_ros'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=[package_name, f'{package_name}.core', f'{package_name}.msg_adapters'],
+    packages=[package_name, f'{package_name}.core', f'{package_name}.dataset',
+              f'{package_name}.msg_adapters'],
     # msg_adapters/ sits at the top level of the repository but installs inside our namespace
     package_dir={f'{package_name}.msg_adapters': 'msg_adapters'},
     data_files=[
@@ -19,9 +20,11 @@ setup(
     # what runs: the core (numpy, numba, scipy; pyyaml for scenario files; pillow for a
     # texture image file) and Rerun recording (node, headless, replay). package.xml names the
     # same as rosdep keys, but for numba and rerun-sdk, which have none: without rerun-sdk the
-    # node runs and refuses only to record (README).
+    # node runs and refuses only to record (README). Ray runs datasets (paper_sim_dataset;
+    # no rosdep key either): [default] is what `ray start` nodes and KubeRay images have, and
+    # it brings the Ray Client (ray://).
     install_requires=['setuptools', 'numpy', 'numba', 'scipy', 'pyyaml', 'pillow',
-                      'rerun-sdk==0.41.*', 'rosbags'],
+                      'rerun-sdk==0.41.*', 'rosbags', 'ray[default]==2.60.*'],
     # what only the tests and the linters use (`make setup` installs '.[test]')
     extras_require={
         'test': ['pytest', 'import-linter', 'flake8', 'mcap', 'mcap-ros2-support',
@@ -39,6 +42,7 @@ setup(
             'paper_sim_headless = paper_sim_ros.headless:main',
             'paper_sim_node = paper_sim_ros.node:main',
             'paper_sim_probe = paper_sim_ros.scripted_probe:main',
+            'paper_sim_dataset = paper_sim_ros.dataset.cli:main',
         ],
     },
 )
