@@ -1,6 +1,6 @@
 """One run, on a worker: the resolved scenario through the headless runner's run path
-(``core.load_scenario``, ``core.run_scenario``, ``headless_bag.HeadlessBag``, the headless
-runner's Rerun recording), its outputs written to a temporary folder and checked. A worker
+(``core.load_scenario``, ``core.run_scenario``, ``run_outputs.RunOutputs``: the headless
+runner's recording and bag), its outputs written to a temporary folder and checked. A worker
 that shares the driver's file system then renames that folder into the dataset; one on
 another machine hands the files back as bytes (``outputs.Destination``).
 
@@ -19,9 +19,7 @@ import yaml
 
 from ..core import (Scenario, Simulator, build_simulator, load_scenario, run_scenario,
                     write_metrics)
-from ..headless import _recording_callback as headless_recording_callback
-from ..headless_bag import HeadlessBag
-from ..rerun_logger import RerunRecorder
+from ..run_outputs import RunOutputs
 from .manifest import run_record
 from .outputs import (BAG_DIR, METRICS_FILE, RRD_FILE, SCENARIO_FILE, Destination,
                       new_partial, output_problem, publish, read_tree)
@@ -87,27 +85,16 @@ def execute_run(request: RunRequest, outputs: Outputs, destination: Destination,
 
 def produce(scenario: Scenario, simulator: Simulator, outputs: Outputs, directory: str) -> dict:
     """Run ``scenario`` on ``simulator`` (fresh from ``build_simulator``), writing the
-    outputs wanted into ``directory``; the metrics."""
-    callbacks = []
-    recorder = bag = None
+    outputs wanted into ``directory`` as ``paper_sim_headless --rrd/--bag`` does; the
+    metrics."""
+    run_outputs = RunOutputs(
+        scenario, simulator, application_id='paper_sim_dataset',
+        rrd=os.path.join(directory, RRD_FILE) if outputs.rrd else None,
+        bag=os.path.join(directory, BAG_DIR) if outputs.bag else None)
     try:
-        if outputs.rrd:
-            recorder = RerunRecorder('paper_sim_dataset', path=os.path.join(directory, RRD_FILE),
-                                     recording_info={'scenario': scenario.mapping},
-                                     appearance=scenario.appearance)
-            # the headless runner's frame logging: a dataset's recording is the one
-            # paper_sim_headless --rrd makes
-            callbacks.append(headless_recording_callback(recorder, scenario.config.solver.dt))
-        if outputs.bag:
-            bag = HeadlessBag(os.path.join(directory, BAG_DIR), scenario, simulator, None)
-            callbacks.append(lambda simulator, seconds: bag.on_frame(simulator))
-        metrics = run_scenario(scenario, simulator=simulator,
-                               on_frame=lambda simulator, seconds: [
-                                   callback(simulator, seconds) for callback in callbacks])
+        metrics = run_scenario(scenario, simulator=simulator, on_frame=run_outputs.on_frame)
     finally:
-        for output in (recorder, bag):
-            if output is not None:
-                output.close()
+        run_outputs.close()
     write_metrics(metrics, os.path.join(directory, METRICS_FILE))
     return metrics
 
