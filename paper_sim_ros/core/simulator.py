@@ -50,7 +50,7 @@ local/global iteration must take out for the next one to run (docs/solver.md).""
 FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
 GRIP_ROW, CONTACT_ROW = 0, 1
-"""Kinds of the solves' constraint rows (Simulator._contact_rows)."""
+"""Kinds of the solves' constraint rows (Simulator._set_contact_rows)."""
 
 
 class Simulator:
@@ -352,7 +352,7 @@ class Simulator:
         positions[gripped, 2] = self.config.contact.ground_height  # pinched on the table
         if self._global_step is None:
             return
-        self._rows = self._contact_rows(h, positions, probe_from, probe_to, start_positions)
+        self._set_contact_rows(positions, probe_from, probe_to, start_positions)
         inertia_weight = (sheet.vertex_mass / (h * h))[:, None]
         rhs = np.empty_like(positions)
         iterations = solver.projective_iterations
@@ -437,8 +437,9 @@ class Simulator:
             self._row_kind = kind[keep]
             self._global_step.solve(rhs, positions, *self._rows)
 
-    def _contact_rows(self, h, positions, probe_from, probe_to, start_positions) -> tuple:
-        """What the probes hold in this sub-step's solves, as ConstrainedSolve rows: each
+    def _set_contact_rows(self, positions, probe_from, probe_to, start_positions) -> None:
+        """What the probes hold in this sub-step's solves, as ConstrainedSolve rows
+        (``_rows``: vertex, direction, value; ``_row_kind``: GRIP_ROW, CONTACT_ROW): each
         gripped vertex where its probe carries it (three rows), and each vertex a probe
         reaches from where inertia takes it on that probe's surface along its normal (one
         row, so the sheet slides over the probe instead of being dragged through itself)."""
@@ -460,11 +461,11 @@ class Simulator:
             nearest = np.argmin(gap, axis=1)
             normal = offset[np.arange(contact.size), nearest]
             normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
-            ground = self.config.contact
-            if ground.ground_enabled:
+            table = self.config.contact
+            if table.ground_enabled:
                 # pinched on the table under a flattened pad: the pad's face is the contact
                 surface_z = probe_to[nearest, 2] + self.probes.radius[nearest] * normal[:, 2]
-                pinched = surface_z < ground.ground_height
+                pinched = surface_z < table.ground_height
                 normal[pinched] = (0.0, 0.0, -1.0)
         vertex = np.concatenate([np.repeat(gripped, 3), contact])
         direction = np.concatenate([np.tile(np.eye(3), (gripped.size, 1)), normal])
@@ -474,7 +475,7 @@ class Simulator:
                                          np.full(contact.size, CONTACT_ROW)])
         # what the probes hold is not the table's to support (nor, once let go, to launch)
         self._table_reaction[vertex] = 0.0
-        return vertex, direction, value
+        self._rows = (vertex, direction, value)
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
                       inverse_mass) -> None:
