@@ -291,19 +291,23 @@ def test_squeeze_keeps_a_set_with_one_and_with_four_substeps(squeeze):
         assert metrics['breaks'] < 40 and metrics['mesh_valid'], metrics
 
 
-def crushed_crumpled_sheet_breaks(fragility: float) -> int:
-    """Breaks when a 2 cm probe presses 6 mm into a crumpled 17² sheet on the table, with
-    the paper's own solver: its springs are forces, so Eq. 7 sees the literal l / l0."""
-    config = SimulationConfig(sheet=SMALL, solver=SolverConfig(method='paper', substeps=4),
-                              contact=ContactConfig(ground_enabled=True),
-                              damage=DamageConfig(fragility=fragility))
-    simulator = Simulator(config)
+def crush_crumpled_sheet(simulator: Simulator, frames: int) -> None:
+    """Crumple ``simulator``'s sheet, then press a 2 cm probe into it by 0.2 mm a frame."""
     simulator.crumple(60, seed=2)
     centre = np.array([[0.0, 0.0, 0.02]])
-    for frame in range(30):
+    for frame in range(frames):
         centre[0, 2] = 0.02 - 0.0002 * frame
         simulator.set_probes(centre, [0.02], [True])
         simulator.step_frame()
+
+
+def crushed_crumpled_sheet_breaks(fragility: float) -> int:
+    """Breaks when a 2 cm probe presses 6 mm into a crumpled 17² sheet on the table, with
+    the paper's own solver: its springs are forces, so Eq. 7 sees the literal l / l0."""
+    simulator = Simulator(SimulationConfig(
+        sheet=SMALL, solver=SolverConfig(method='paper', substeps=4),
+        contact=ContactConfig(ground_enabled=True), damage=DamageConfig(fragility=fragility)))
+    crush_crumpled_sheet(simulator, 30)
     return simulator.breaks
 
 
@@ -366,12 +370,7 @@ def test_damage_works_with_the_papers_solver():
                               contact=ContactConfig(ground_enabled=True))
     simulator = Simulator(config)
     mass = exact_mass(simulator.sheet)
-    simulator.crumple(60, seed=2)
-    centre = np.array([[0.0, 0.0, 0.02]])
-    for frame in range(90):
-        centre[0, 2] = 0.02 - 0.0002 * frame
-        simulator.set_probes(centre, [0.02], [True])
-        simulator.step_frame()
+    crush_crumpled_sheet(simulator, 90)
     assert not simulator.nan_seen
     assert mesh_problems(simulator.sheet) == []
     assert exact_mass(simulator.sheet) == mass

@@ -110,9 +110,9 @@ def _frame(positions, i, j, r, left, frame, geometry):
                 frame[0, 0], frame[0, 1], frame[0, 2])
 
 
-@njit(cache=True)
-def _curvature_in_frame(positions, quads, weights, h, frame, curvature):
-    """κ = Σ w_v x_v of hinge ``h`` in its frame's coordinates, into ``curvature``."""
+@njit(cache=True, inline='always')
+def _curvature(positions, quads, weights, h):
+    """κ = Σ w_v x_v of hinge ``h`` in world coordinates."""
     kx = 0.0
     ky = 0.0
     kz = 0.0
@@ -121,6 +121,13 @@ def _curvature_in_frame(positions, quads, weights, h, frame, curvature):
         kx += weights[h, corner] * positions[v, 0]
         ky += weights[h, corner] * positions[v, 1]
         kz += weights[h, corner] * positions[v, 2]
+    return kx, ky, kz
+
+
+@njit(cache=True)
+def _curvature_in_frame(positions, quads, weights, h, frame, curvature):
+    """κ = Σ w_v x_v of hinge ``h`` in its frame's coordinates, into ``curvature``."""
+    kx, ky, kz = _curvature(positions, quads, weights, h)
     for row in range(3):
         curvature[row] = frame[row, 0] * kx + frame[row, 1] * ky + frame[row, 2] * kz
 
@@ -214,14 +221,7 @@ def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_cur
             continue
         # |κ − κ0| ≤ |κ| + |κ0|, and |κ| needs no frame: most hinges of a sheet bend far
         # less than the yield and are passed over at the cost of Σ w x
-        kx = 0.0
-        ky = 0.0
-        kz = 0.0
-        for corner in range(4):
-            v = quads[h, corner]
-            kx += weights[h, corner] * positions[v, 0]
-            ky += weights[h, corner] * positions[v, 1]
-            kz += weights[h, corner] * positions[v, 2]
+        kx, ky, kz = _curvature(positions, quads, weights, h)
         bound = np.sqrt(kx * kx + ky * ky + kz * kz) + np.sqrt(
             rest_curvature[h, 0] ** 2 + rest_curvature[h, 1] ** 2 + rest_curvature[h, 2] ** 2)
         if bound <= yield_curvature * 0.25 * _edge_floor(positions, quads, h):
