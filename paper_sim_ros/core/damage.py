@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from .config import DamageConfig
+from .kernels import springs_shorter_than
 from .mesh_editing import MeshEditor, breakable_springs, spring_lengths
 from .probe_compression import ProbeCompression
 from .probes import Probes
@@ -90,10 +91,10 @@ class DamageModel:
         if self._at_cap(sheet.vertex_count):
             return False
         compression = self.compression(sheet)
-        candidates = breakable_springs(sheet.spring_kind, sheet.spring_vertices,
-                                       sheet.spring_rest_length, sheet.pinned,
-                                       config.min_breakable_length)
-        candidates = candidates[compression[candidates] > config.compression_floor]
+        compressed = np.flatnonzero(compression > config.compression_floor)
+        candidates = compressed[breakable_springs(
+            sheet.spring_kind[compressed], sheet.spring_vertices[compressed],
+            sheet.spring_rest_length[compressed], sheet.pinned, config.min_breakable_length)]
         broken = np.zeros(0, dtype=np.int64)
         if candidates.size:
             probability = np.minimum(compression[candidates], 1.0) ** config.fragility
@@ -103,10 +104,9 @@ class DamageModel:
             broken = candidates[draw < probability]
             # most compressed first; a stable order keeps the run reproducible
             broken = broken[np.argsort(-compression[broken], kind='stable')]
-        bend = np.flatnonzero(sheet.spring_kind == BEND)
-        bend_ratio = spring_lengths(sheet.positions, sheet.spring_vertices[bend]) \
-            / sheet.spring_rest_length[bend]
-        folding = bend[bend_ratio < config.fold_threshold]
+        folding = springs_shorter_than(sheet.positions, sheet.spring_vertices,
+                                       sheet.spring_rest_length, sheet.spring_kind, BEND,
+                                       config.fold_threshold)
         if broken.size == 0 and folding.size == 0:
             return False
         editor = MeshEditor(sheet, self.aux_stiffness)

@@ -418,6 +418,20 @@ def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
 
 
 @njit(cache=True)
+def springs_shorter_than(positions, spring_vertices, rest_length, spring_kind, kind, ratio):
+    """Indices, ascending, of the springs of one kind shorter than ``ratio`` × rest length
+    (one pass, no (S, 3) temporaries: the damage check runs it every frame)."""
+    short = np.empty(spring_vertices.shape[0], dtype=np.int64)
+    count = 0
+    for s in range(spring_vertices.shape[0]):
+        if spring_kind[s] == kind and _spring_strain(positions, spring_vertices, rest_length,
+                                                     s) < ratio - 1.0:
+            short[count] = s
+            count += 1
+    return short[:count].copy()
+
+
+@njit(cache=True)
 def excess_compression(positions, spring_vertices, rest_length, threshold):
     """Σ max(0, 1 − l/l0 − threshold) over the springs: how squeezed a sheet still is."""
     total = 0.0
