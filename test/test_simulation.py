@@ -344,6 +344,46 @@ def test_global_step_solves_its_system_with_pins():
         np.testing.assert_array_equal(positions[pinned], pinned_positions)
 
 
+def test_damage_updates_the_factors_exactly():
+    """Breaks and folds one after another (new vertices, new springs, changed hinges)
+    reuse the last factors (projective.UpdatedStep, Woodbury's identity) and give what a
+    new factor of the changed mesh gives, to round-off; once the updates have cost more
+    than a factor, the simulator factors afresh."""
+    from paper_sim_ros.core import projective
+    from paper_sim_ros.core.projective import GlobalStep, UpdatedStep, spring_entries
+    scenario = load_scenario('hanging', grid=17, seed=4)
+    simulator = build_simulator(scenario)
+    h = scenario.config.solver.dt / scenario.config.solver.substeps
+    rng = np.random.default_rng(5)
+    updated = 0
+    for event in range(8):
+        vertex_count = simulator.sheet.vertex_count
+        simulator.crumple(1, seed=event)
+        sheet = simulator.sheet
+        for solve, entries in (
+                (simulator._global_step,
+                 spring_entries(simulator._held_ends, simulator._global_weight)),
+                (simulator._bending_step, simulator._bending.matrix_entries())):
+            updated += isinstance(solve.step, UpdatedStep)
+            rhs = rng.normal(size=(sheet.vertex_count, 3))
+            positions = sheet.positions.copy()
+            fresh = sheet.positions.copy()
+            solve.step.solve(rhs, positions)
+            GlobalStep(sheet.vertex_mass, sheet.pinned, entries, h).solve(rhs, fresh)
+            np.testing.assert_allclose(positions, fresh, rtol=0, atol=1e-9 * np.abs(fresh).max())
+        assert sheet.vertex_count >= vertex_count
+    assert simulator.breaks > 0 and simulator.folds > 0
+    assert updated >= 12, 'the changes were factored anew, not updated'
+    # solving on pays for the updates: the factors are renewed at the end of a frame
+    step = simulator._bending_step.step
+    assert isinstance(step, UpdatedStep) and not step.stale
+    for _ in range(int(projective.REFACTOR_COST / step._extra_per_solve) + 1):
+        step.solve(np.zeros((simulator.sheet.vertex_count, 3)), simulator.sheet.positions.copy())
+    assert step.stale
+    simulator.step_frame()
+    assert isinstance(simulator._bending_step.step, GlobalStep)
+
+
 def test_constrained_solve_equals_a_factor_with_the_vertices_held():
     """ConstrainedSolve (core/projective.py): rows holding some vertices where they are
     and others on a plane through them give, on the pins-only factor, what a factor with

@@ -131,6 +131,17 @@ def inertial_step(positions, velocities, pinned, mass, h, air_damping, gravity,
             weighted_inertia[v, axis] = scale * positions[v, axis]
 
 
+def system_matrix(vertex_mass: np.ndarray,
+                  stiffness: tuple[np.ndarray, np.ndarray, np.ndarray],
+                  h: float) -> sparse.csr_matrix:
+    """M/h² + K in CSR, K from (rows, columns, values [N/m]) whose duplicates add up."""
+    vertex_count = vertex_mass.shape[0]
+    rows, columns, values = stiffness
+    stiffness_matrix = sparse.coo_matrix((values, (rows, columns)),
+                                         shape=(vertex_count, vertex_count)).tocsr()
+    return (sparse.diags(vertex_mass / (h * h)) + stiffness_matrix).tocsr()
+
+
 def spring_entries(spring_vertices: np.ndarray,
                    weight: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(rows, columns, values) of Σ k_s A_sᵀ A_s, the springs' graph Laplacian [N/m]."""
@@ -149,11 +160,12 @@ class GlobalStep:
         """``stiffness``: (rows, columns, values [N/m]) of K (duplicates add up). Each
         coupling reaching two cells across (BEND springs, the bending step) about triples
         the factor's fill and each solve's cost: the springs' step has none."""
-        vertex_count = vertex_mass.shape[0]
-        rows, columns, values = stiffness
-        stiffness_matrix = sparse.coo_matrix((values, (rows, columns)),
-                                             shape=(vertex_count, vertex_count)).tocsr()
-        system = (sparse.diags(vertex_mass / (h * h)) + stiffness_matrix).tocsr()
+        self._factor(system_matrix(vertex_mass, stiffness, h), pinned)
+
+    def _factor(self, system: sparse.csr_matrix, pinned: np.ndarray) -> None:
+        self.system = system
+        """M/h² + K over all vertices (what an UpdatedStep compares a changed mesh's with)."""
+        self.pinned_mask = pinned.copy()
         self.free = np.flatnonzero(~pinned).astype(np.int64)
         self.pinned = np.flatnonzero(pinned).astype(np.int64)
         # pinned vertices are not unknowns: their couplings go to the right-hand side
@@ -171,12 +183,240 @@ class GlobalStep:
             raise RuntimeError('the global step lost its symmetric ordering')
         self._factors = _strictly_lower(factor.L) + (factor.U.diagonal(),
                                                      factor.perm_r.astype(np.int32))
+        self.factor_entries = self._factors[1].size
+        self.stale = False
+        """A factor is never stale (UpdatedStep.stale)."""
         self._work = np.zeros((self.free.size, 3))
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
         """Overwrite the free vertices of ``positions`` with the global step's solution."""
         _solve_factored(*self._factors, *self._coupling, self.free, rhs, positions,
                         self._work)
+
+
+MAX_UPDATE_VERTICES = 64
+"""A changed mesh reuses the last factor while its change touches at most this many
+vertices (UpdatedStep); beyond, it is factored afresh."""
+REFACTOR_COST = 50.0
+"""A factorisation costs about this many solves (65², either system; docs/solver.md): an
+UpdatedStep whose solves have paid that much extra is ``stale``, and the next change, or
+the simulator at the end of the frame, factors afresh (so what updates save is never
+spent twice over)."""
+TOUCHED_SOLVE_SHARE = 0.3
+"""One touched vertex adds this × (vertex count / factor entries) of a solve to every
+solve (measured: a pass over the sheet against a factor entry's share)."""
+CHANGE_TOLERANCE = 1e-12
+"""Entries of two systems that differ by less than this × the largest diagonal entry are
+the same (the rounding of a different summation order)."""
+
+
+def global_step(vertex_mass: np.ndarray, pinned: np.ndarray,
+                stiffness: tuple[np.ndarray, np.ndarray, np.ndarray], h: float,
+                previous: 'GlobalStep | UpdatedStep | None' = None
+                ) -> 'GlobalStep | UpdatedStep':
+    """The global step of a mesh: ``previous``'s factor updated when the mesh changed
+    little since it was factored (same pins, a few vertices touched: UpdatedStep), else a
+    new factor."""
+    system = system_matrix(vertex_mass, stiffness, h)
+    if previous is not None:
+        step = UpdatedStep.of(previous, system, pinned)
+        if step is not None:
+            return step
+    step = GlobalStep.__new__(GlobalStep)
+    step._factor(system, pinned)
+    return step
+
+
+class UpdatedStep:
+    """A changed mesh's global step answered by an earlier factor (Woodbury's identity).
+    The new system is A' = A + E Δ Eᵀ: A the factored system extended by the vertices
+    added since, each on its own with the diagonal entry it first had; Δ the change on the
+    touched vertices T (E selects them). With x₀ = A⁻¹ b and the columns Z = A⁻¹ E,
+
+        x = x₀ − Z Δ x_T,   (Z_TT⁻¹ + Δ) x_T = Z_TT⁻¹ x₀_T,
+
+    both T × T matrices symmetric positive definite (Z_TT⁻¹ + Δ is A' reduced to T). A
+    break or fold touches a few vertices: their columns cost a solve per three (kept for
+    the next change), instead of a factorisation; each solve then costs one pass over the
+    sheet per touched vertex, so beyond MAX_UPDATE_VERTICES the mesh is factored anew."""
+
+    @classmethod
+    def of(cls, previous: 'GlobalStep | UpdatedStep', system: sparse.csr_matrix,
+           pinned: np.ndarray) -> 'UpdatedStep | None':
+        """``system`` answered by ``previous``'s factor, or None if it cannot be (vertices
+        removed, pins changed, a pinned vertex touched, too many touched)."""
+        if previous.stale:
+            return None
+        base = previous.base if isinstance(previous, UpdatedStep) else previous
+        base_count = base.system.shape[0]
+        count = system.shape[0]
+        if count < base_count or np.any(pinned[base_count:]) \
+                or not np.array_equal(pinned[:base_count], base.pinned_mask):
+            return None
+        diagonal = system.diagonal()
+        known = previous.added_diagonal if isinstance(previous, UpdatedStep) \
+            else np.zeros(0)
+        added_diagonal = np.concatenate([known, diagonal[base_count + known.size:]])
+        extended = sparse.block_diag((base.system, sparse.diags(added_diagonal)),
+                                     format='csr')
+        difference = (system - extended).tocoo()
+        changed = np.abs(difference.data) > CHANGE_TOLERANCE * np.abs(diagonal).max()
+        touched = np.unique(np.concatenate([difference.row[changed],
+                                            difference.col[changed]])).astype(np.int64)
+        if touched.size > MAX_UPDATE_VERTICES or np.any(pinned[touched]):
+            return None
+        if touched.size == 0 and count == previous.system.shape[0]:
+            return previous  # the same system (pins set again, say)
+        change = (system[touched][:, touched] - extended[touched][:, touched]).toarray()
+        return cls(base, system, pinned, added_diagonal, touched, change,
+                   previous if isinstance(previous, UpdatedStep) else None)
+
+    def __init__(self, base: GlobalStep, system: sparse.csr_matrix, pinned: np.ndarray,
+                 added_diagonal: np.ndarray, touched: np.ndarray, change: np.ndarray,
+                 previous: 'UpdatedStep | None' = None) -> None:
+        self.base = base
+        self.system = system
+        self.pinned_mask = pinned.copy()
+        self.free = np.flatnonzero(~pinned).astype(np.int64)
+        self.added_diagonal = added_diagonal
+        """The diagonal entry of each vertex added since ``base`` when it first appeared."""
+        base_count = base.system.shape[0]
+        self._added = np.arange(base_count, system.shape[0], dtype=np.int64)
+        self._touched = touched
+        self._extra_per_solve = TOUCHED_SOLVE_SHARE * touched.size * system.shape[0] \
+            / max(base.factor_entries, 1)
+        self._extra = previous._extra if previous is not None else 0.0
+        """Solves' worth of work the updates cost since ``base`` was factored."""
+        # Z = A⁻¹ E: the previous update's columns (A is the same; an added vertex's column
+        # is zero on the vertices added after it), three more per solve of the factor
+        count = system.shape[0]
+        self._columns = np.zeros((touched.size, count))
+        known = np.zeros(touched.size, dtype=bool)
+        if previous is not None:
+            row_of = np.full(count, -1)
+            row_of[previous._touched] = np.arange(previous._touched.size)
+            known = row_of[touched] >= 0
+            self._columns[known, :previous._columns.shape[1]] = \
+                previous._columns[row_of[touched[known]]]
+        missing = np.flatnonzero(~known)
+        unit = np.zeros((count, 3))
+        response = np.zeros((count, 3))
+        for start in range(0, missing.size, 3):
+            batch = missing[start:start + 3]
+            unit[:] = 0.0
+            unit[touched[batch], np.arange(batch.size)] = 1.0
+            self._solve_extended(unit, response)
+            self._columns[batch] = response[:, :batch.size].T
+        # x_T's map: Δ (Z_TT⁻¹ + Δ)⁻¹ Z_TT⁻¹, so that x = x₀ − Z (map x₀_T)
+        self._map = np.empty((touched.size, touched.size))
+        _woodbury_map(self._columns[:, touched], change, self._map)
+        self._correction = np.empty((touched.size, 3))
+
+    def _solve_extended(self, rhs: np.ndarray, positions: np.ndarray) -> None:
+        self.base.solve(rhs, positions)
+        positions[self._added] = rhs[self._added] / self.added_diagonal[:, None]
+
+    @property
+    def stale(self) -> bool:
+        """The updates have cost more than a new factor would have."""
+        return self._extra > REFACTOR_COST
+
+    def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
+        """Overwrite the free vertices of ``positions`` with the changed system's solution."""
+        self._extra += self._extra_per_solve
+        self._solve_extended(rhs, positions)
+        _apply_woodbury(self._map, self._columns, self._touched, positions, self._correction)
+
+
+@njit(cache=True)
+def _cholesky(matrix, lower):
+    """Lower Cholesky factor of a small symmetric positive definite matrix, read from its
+    lower triangle (``lower`` may be ``matrix``: in place). In numba, not LAPACK: the same
+    bits on any thread count."""
+    size = matrix.shape[0]
+    for r in range(size):
+        for c in range(r + 1):
+            total = matrix[r, c]
+            for k in range(c):
+                total -= lower[r, k] * lower[c, k]
+            if r == c:
+                lower[r, r] = np.sqrt(max(total, 1e-300))
+            else:
+                lower[r, c] = total / lower[c, c]
+        for c in range(r + 1, size):
+            lower[r, c] = 0.0
+
+
+@njit(cache=True)
+def _cholesky_solve(lower, rhs):
+    """rhs ← (G Gᵀ)⁻¹ rhs, column by column."""
+    size = lower.shape[0]
+    for column in range(rhs.shape[1]):
+        for r in range(size):
+            total = rhs[r, column]
+            for k in range(r):
+                total -= lower[r, k] * rhs[k, column]
+            rhs[r, column] = total / lower[r, r]
+        for step in range(size):
+            r = size - 1 - step
+            total = rhs[r, column]
+            for k in range(r + 1, size):
+                total -= lower[k, r] * rhs[k, column]
+            rhs[r, column] = total / lower[r, r]
+
+
+@njit(cache=True)
+def _woodbury_map(inverse_on_touched, change, out):
+    """out = Δ (Z_TT⁻¹ + Δ)⁻¹ Z_TT⁻¹ (UpdatedStep), Z_TT = ``inverse_on_touched``."""
+    size = change.shape[0]
+    lower = np.empty((size, size))
+    _cholesky(inverse_on_touched, lower)
+    reduced = np.eye(size)  # Z_TT⁻¹, then Z_TT⁻¹ + Δ
+    _cholesky_solve(lower, reduced)
+    inverse_term = reduced.copy()
+    for r in range(size):
+        for c in range(size):
+            reduced[r, c] = 0.5 * (inverse_term[r, c] + inverse_term[c, r]) + change[r, c]
+    _cholesky(reduced, lower)
+    _cholesky_solve(lower, inverse_term)  # (Z_TT⁻¹ + Δ)⁻¹ Z_TT⁻¹
+    for r in range(size):
+        for c in range(size):
+            total = 0.0
+            for k in range(size):
+                total += change[r, k] * inverse_term[k, c]
+            out[r, c] = total
+
+
+@njit(cache=True)
+def _apply_woodbury(woodbury_map, columns, touched, positions, correction):
+    """positions ← positions − Z (map · positions_T), on the three columns."""
+    size = touched.shape[0]
+    for r in range(size):
+        for axis in range(3):
+            total = 0.0
+            for k in range(size):
+                total += woodbury_map[r, k] * positions[touched[k], axis]
+            correction[r, axis] = total
+    _subtract_columns(columns, correction, np.ones(size, dtype=np.bool_), positions)
+
+
+@njit(cache=True)
+def _subtract_columns(columns, weight, used, positions):
+    """positions ← positions − Σ_c columns[c] ⊗ weight[c] over the ``used`` columns: one
+    pass over the sheet per column."""
+    for c in range(columns.shape[0]):
+        if not used[c]:
+            continue
+        w0 = weight[c, 0]
+        w1 = weight[c, 1]
+        w2 = weight[c, 2]
+        column = columns[c]
+        for v in range(positions.shape[0]):
+            z = column[v]
+            if z != 0.0:
+                positions[v, 0] -= z * w0
+                positions[v, 1] -= z * w1
+                positions[v, 2] -= z * w2
 
 
 class ConstrainedSolve:
@@ -258,15 +498,7 @@ def _factor_rows(columns, row_vertex, row_column, row_direction, lower):
                          + row_direction[r, 1] * row_direction[s, 1]
                          + row_direction[r, 2] * row_direction[s, 2])
             lower[r, s] = alignment * columns[row_column[s], row_vertex[r]]
-    for r in range(rows):
-        for s in range(r + 1):
-            total = lower[r, s]
-            for k in range(s):
-                total -= lower[r, k] * lower[s, k]
-            if r == s:
-                lower[r, r] = np.sqrt(max(total, 1e-300))
-            else:
-                lower[r, s] = total / lower[s, s]
+    _cholesky(lower, lower)
 
 
 @njit(cache=True)
@@ -278,17 +510,7 @@ def _constrain(lower, columns, row_vertex, row_column, row_direction, row_value,
         multipliers[r] = (row_direction[r, 0] * positions[row_vertex[r], 0]
                           + row_direction[r, 1] * positions[row_vertex[r], 1]
                           + row_direction[r, 2] * positions[row_vertex[r], 2]) - row_value[r]
-    for r in range(rows):
-        total = multipliers[r]
-        for k in range(r):
-            total -= lower[r, k] * multipliers[k]
-        multipliers[r] = total / lower[r, r]
-    for step in range(rows):
-        r = rows - 1 - step
-        total = multipliers[r]
-        for k in range(r + 1, rows):
-            total -= lower[k, r] * multipliers[k]
-        multipliers[r] = total / lower[r, r]
+    _cholesky_solve(lower, multipliers.reshape((rows, 1)))
     # one pass over the sheet per distinct column: the rows of a vertex add up first
     weight = np.zeros((columns.shape[0], 3))
     used = np.zeros(columns.shape[0], dtype=np.bool_)
@@ -297,16 +519,4 @@ def _constrain(lower, columns, row_vertex, row_column, row_direction, row_value,
         used[c] = True
         for axis in range(3):
             weight[c, axis] += multipliers[r] * row_direction[r, axis]
-    for c in range(columns.shape[0]):
-        if not used[c]:
-            continue
-        w0 = weight[c, 0]
-        w1 = weight[c, 1]
-        w2 = weight[c, 2]
-        column = columns[c]
-        for v in range(positions.shape[0]):
-            z = column[v]
-            if z != 0.0:
-                positions[v, 0] -= z * w0
-                positions[v, 1] -= z * w1
-                positions[v, 2] -= z * w2
+    _subtract_columns(columns, weight, used, positions)

@@ -31,7 +31,7 @@ from .bending import HingeBending
 from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
-from .projective import (ConstrainedSolve, GlobalStep, inertial_step, local_targets,
+from .projective import (ConstrainedSolve, global_step, inertial_step, local_targets,
                          spring_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
 from .topology import vertex_normals
@@ -74,6 +74,7 @@ class Simulator:
         self._table_reaction = np.zeros(self.sheet.vertex_count)
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
         self._bending = None  # rest angles from the initial sheet
+        self._global_step = self._bending_step = None  # factored anew
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
             self.config.damage, self.config.seed, self.config.sheet.aux_stiffness,
@@ -148,8 +149,8 @@ class Simulator:
         self._grip_probe = np.concatenate([self._grip_probe, np.full(added, -1)])
         self._grip_offset = np.concatenate([self._grip_offset, np.zeros((added, 3))])
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
-        self._global_step = self._bending_step = None
         if self.config.solver.method != 'constrained':
+            self._global_step = self._bending_step = None
             self._constraint_springs = np.zeros(0, dtype=np.int64)
             self._near_pin_count = 0
             self._build_attachments()
@@ -184,14 +185,19 @@ class Simulator:
         h = self.config.solver.dt / self.config.solver.substeps
         pinned = sheet.pinned
         self._table_reaction[pinned] = 0.0  # held vertices are not the solve's to support
+        # a small change (a break, a fold) reuses the last factors (projective.UpdatedStep)
+        previous_bending = self._bending_step.step if self._bending_step else None
+        previous_springs = self._global_step.step if self._global_step else None
         self._global_step = self._bending_step = None
         if np.any(~pinned):
             self._bending_step = ConstrainedSolve(
-                GlobalStep(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h),
+                global_step(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h,
+                            previous_bending),
                 sheet.vertex_count)
             self._global_step = ConstrainedSolve(
-                GlobalStep(sheet.vertex_mass, pinned,
-                           spring_entries(self._held_ends, self._global_weight), h),
+                global_step(sheet.vertex_mass, pinned,
+                            spring_entries(self._held_ends, self._global_weight), h,
+                            previous_springs),
                 sheet.vertex_count)
 
     def _build_attachments(self) -> None:
@@ -244,6 +250,9 @@ class Simulator:
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
                                self.sheet.positions - saved_positions):
             self.topology_changed()
+        elif any(step is not None and step.step.stale
+                 for step in (self._global_step, self._bending_step)):
+            self._factor_global_steps()  # the updates since the last factor cost more
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
         self.frame += 1
