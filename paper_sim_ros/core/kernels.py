@@ -481,17 +481,37 @@ def probe_penetration(positions, probe_center, probe_radius, probe_active, groun
     flattened there like a fingertip (its sphere cut by the table plane), so a vertex
     pinched on the table under it is at its surface, not inside it."""
     deepest = 0.0
+    for v in range(positions.shape[0]):
+        deepest = max(deepest, _probe_depth(positions, v, probe_center, probe_radius,
+                                            probe_active, ground_height, ground_enabled))
+    return deepest
+
+
+@njit(cache=True)
+def inside_probes(positions, probe_center, probe_radius, probe_active, ground_height,
+                  ground_enabled, tolerance, inside):
+    """Mark in ``inside`` the vertices deeper than ``tolerance`` [m] inside an active probe
+    (flattened on the table as in ``probe_penetration``)."""
+    for v in range(positions.shape[0]):
+        inside[v] = _probe_depth(positions, v, probe_center, probe_radius, probe_active,
+                                 ground_height, ground_enabled) > tolerance
+
+
+@njit(cache=True, inline='always')
+def _probe_depth(positions, v, probe_center, probe_radius, probe_active, ground_height,
+                 ground_enabled):
+    """How deep vertex v sits inside the active probes [m] (≤ 0: outside)."""
+    deepest = -np.inf
     for p in range(probe_radius.shape[0]):
         if not probe_active[p]:
             continue
-        for v in range(positions.shape[0]):
-            dx = positions[v, 0] - probe_center[p, 0]
-            dy = positions[v, 1] - probe_center[p, 1]
-            dz = positions[v, 2] - probe_center[p, 2]
-            depth = probe_radius[p] - np.sqrt(dx * dx + dy * dy + dz * dz)
-            if ground_enabled:
-                depth = min(depth, positions[v, 2] - ground_height)
-            deepest = max(deepest, depth)
+        dx = positions[v, 0] - probe_center[p, 0]
+        dy = positions[v, 1] - probe_center[p, 1]
+        dz = positions[v, 2] - probe_center[p, 2]
+        depth = probe_radius[p] - np.sqrt(dx * dx + dy * dy + dz * dz)
+        if ground_enabled:
+            depth = min(depth, positions[v, 2] - ground_height)
+        deepest = max(deepest, depth)
     return deepest
 
 

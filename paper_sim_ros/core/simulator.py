@@ -51,6 +51,11 @@ FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
 GRIP_ROW, CONTACT_ROW = 0, 1
 """Kinds of the solves' constraint rows (Simulator._set_contact_rows)."""
+CONTACT_ROW_PASSES = 3
+"""Solves per local/global iteration, at most, while its contact rows settle (rows that
+pull let go, vertices carried into a probe given one: Simulator._settle_contact_rows)."""
+CONTACT_TOLERANCE = 1e-5
+"""Depth inside a probe [m] at which a vertex without a contact row gets one."""
 
 
 class Simulator:
@@ -75,6 +80,8 @@ class Simulator:
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
         self._bending = None  # rest angles from the initial sheet
         self._global_step = self._bending_step = None  # factored anew
+        self._probe_from = self._probe_to = np.zeros((0, 3))
+        """Where the probes are at the start and the end of the current sub-step."""
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
             self.config.damage, self.config.seed, self.config.sheet.aux_stiffness,
@@ -432,19 +439,37 @@ class Simulator:
             momentum = next_momentum
 
     def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
-        """One local/global iteration of the held springs (core/projective.py)."""
+        """One local/global iteration of the held springs (core/projective.py), the contact
+        rows settled on its solution (``_settle_contact_rows``)."""
         local_targets(positions, weighted_inertia, self._held_ends, self._held_rest,
                       self._global_weight, rhs)
         multipliers = self._global_step.solve(rhs, positions, *self._rows)
-        # a contact row that pulls its vertex towards the probe is let go: contact only
-        # pushes (the grips' rows, three to a vertex, hold)
-        vertex, direction, value, kind = self._rows + (self._row_kind,)
-        pulling = (kind == CONTACT_ROW) & (multipliers > 0.0)
-        if np.any(pulling):
-            keep = ~pulling
-            self._rows = (vertex[keep], direction[keep], value[keep])
-            self._row_kind = kind[keep]
-            self._global_step.solve(rhs, positions, *self._rows)
+        for _ in range(CONTACT_ROW_PASSES):
+            if not self._settle_contact_rows(positions, multipliers):
+                return
+            multipliers = self._global_step.solve(rhs, positions, *self._rows)
+
+    def _settle_contact_rows(self, positions, multipliers) -> bool:
+        """Contact only pushes: a contact row that pulls its vertex towards the probe is let
+        go (the grips' rows, three to a vertex, hold). And a vertex the solve carried into a
+        probe without a row gets one: left to the stretch pass, it would be pushed out
+        alone, denting the sheet around the probe and stretching it. Returns whether the
+        rows changed (the solve must run again)."""
+        vertex, direction, value = self._rows
+        keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
+        inside = self._inside_probes(positions)
+        inside[vertex] = False
+        if np.all(keep) and not np.any(inside):
+            return False
+        added = np.flatnonzero(inside)
+        normal, surface = self._contact_planes(positions, added, self._probe_to)
+        self._rows = (np.concatenate([vertex[keep], added]),
+                      np.concatenate([direction[keep], normal]),
+                      np.concatenate([value[keep], np.einsum('va,va->v', normal, surface)]))
+        self._row_kind = np.concatenate([self._row_kind[keep],
+                                         np.full(added.size, CONTACT_ROW)])
+        self._table_reaction[added] = 0.0
+        return True
 
     def _set_contact_rows(self, positions, probe_from, probe_to, start_positions) -> None:
         """What the probes hold in this sub-step's solves, as ConstrainedSolve rows
@@ -453,6 +478,7 @@ class Simulator:
         reaches from where inertia takes it on that probe's surface along its normal (one
         row, so the sheet slides over the probe instead of being dragged through itself)."""
         sheet = self.sheet
+        self._probe_from, self._probe_to = probe_from, probe_to
         gripped = np.flatnonzero(self._grip_probe >= 0)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
         if self.probes.count:
@@ -461,21 +487,7 @@ class Simulator:
         touched[gripped] = False
         touched[sheet.pinned] = False
         contact = np.flatnonzero(touched)
-        normal = np.zeros((contact.size, 3))
-        if contact.size:
-            # the normal of the nearest active probe's surface at the projected vertex
-            offset = positions[contact, None, :] - probe_to[None, :, :]
-            gap = np.linalg.norm(offset, axis=2) - self.probes.radius[None, :]
-            gap[:, ~self.probes.active] = np.inf
-            nearest = np.argmin(gap, axis=1)
-            normal = offset[np.arange(contact.size), nearest]
-            normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
-            table = self.config.contact
-            if table.ground_enabled:
-                # pinched on the table under a flattened pad: the pad's face is the contact
-                surface_z = probe_to[nearest, 2] + self.probes.radius[nearest] * normal[:, 2]
-                pinched = surface_z < table.ground_height
-                normal[pinched] = (0.0, 0.0, -1.0)
+        normal, _ = self._contact_planes(positions, contact, probe_to)
         vertex = np.concatenate([np.repeat(gripped, 3), contact])
         direction = np.concatenate([np.tile(np.eye(3), (gripped.size, 1)), normal])
         value = np.concatenate([positions[gripped].reshape(-1),
@@ -485,6 +497,48 @@ class Simulator:
         # what the probes hold is not the table's to support (nor, once let go, to launch)
         self._table_reaction[vertex] = 0.0
         self._rows = (vertex, direction, value)
+
+    def _inside_probes(self, positions) -> np.ndarray:
+        """(V,) bool: the free vertices deeper than CONTACT_TOLERANCE inside an active probe
+        that does not press into the table, at the end of the sub-step."""
+        inside = np.zeros(positions.shape[0], dtype=bool)
+        contact = self.config.contact
+        # a probe pressed into the table pinches what it reaches there (_grip), and the
+        # stretch pass lets the sheet ahead of it buckle (docs/contact.md); a probe rising
+        # lets go of what rode up its front: neither holds more rows
+        free_probes = self.probes.active & ~(
+            contact.ground_enabled
+            & (self._probe_to[:, 2] - self.probes.radius < contact.ground_height)) \
+            & (self._probe_to[:, 2] <= self._probe_from[:, 2])
+        if np.any(free_probes):
+            kernels.inside_probes(positions, self._probe_to, self.probes.radius,
+                                  free_probes, contact.ground_height,
+                                  contact.ground_enabled, CONTACT_TOLERANCE, inside)
+            inside[self.sheet.pinned] = False
+        return inside
+
+    def _contact_planes(self, positions, vertices, probe_to):
+        """Where ``vertices`` touch the nearest active probe: the unit normals out of it and
+        the surface points nearest them; under a probe pressed into the table, its
+        flattened pad's face (the table plane, facing down)."""
+        normal = np.zeros((vertices.size, 3))
+        if vertices.size == 0:
+            return normal, normal.copy()
+        radius = self.probes.radius
+        offset = positions[vertices, None, :] - probe_to[None, :, :]
+        gap = np.linalg.norm(offset, axis=2) - radius[None, :]
+        gap[:, ~self.probes.active] = np.inf
+        nearest = np.argmin(gap, axis=1)
+        normal = offset[np.arange(vertices.size), nearest]
+        normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
+        surface = probe_to[nearest] + radius[nearest, None] * normal
+        table = self.config.contact
+        if table.ground_enabled:
+            pinched = surface[:, 2] < table.ground_height
+            normal[pinched] = (0.0, 0.0, -1.0)
+            surface[pinched, :2] = positions[vertices[pinched], :2]
+            surface[pinched, 2] = table.ground_height
+        return normal, surface
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
                       inverse_mass) -> None:
