@@ -18,13 +18,15 @@ setup(
         (f'share/{package_name}/launch', glob('launch/*.py')),
     ],
     # what runs: the core (numpy, numba, scipy; pyyaml for scenario files; pillow for a
-    # texture image file) and Rerun recording (node, headless, replay). package.xml names the
-    # same as rosdep keys, but for numba and rerun-sdk, which have none: without rerun-sdk the
-    # node runs and refuses only to record (README). Ray runs datasets (paper_sim_dataset;
-    # no rosdep key either): [default] is what `ray start` nodes and KubeRay images have, and
-    # it brings the Ray Client (ray://).
+    # texture image file), Rerun recording (node, headless, replay; pyarrow, which rerun-sdk
+    # brings, is imported directly) and rosbag2 writing (rosbags). package.xml names the
+    # same as rosdep keys, but for numba, rerun-sdk, pyarrow and rosbags, which it leaves to
+    # pip: without rerun-sdk the node runs and refuses only to record (README). Ray runs
+    # datasets (paper_sim_dataset; not in package.xml either): [default] is what `ray start`
+    # nodes and KubeRay images have, and it brings the Ray Client (ray://).
+    # test/test_dependencies.py checks that every module imported at run time is declared.
     install_requires=['setuptools', 'numpy', 'numba', 'scipy', 'pyyaml', 'pillow',
-                      'rerun-sdk==0.41.*', 'rosbags', 'ray[default]==2.60.*'],
+                      'rerun-sdk==0.41.*', 'pyarrow', 'rosbags', 'ray[default]==2.60.*'],
     # what only the tests and the linters use (`make setup` installs '.[test]')
     extras_require={
         'test': ['pytest', 'import-linter', 'flake8', 'mcap', 'mcap-ros2-support',
