@@ -63,10 +63,6 @@ def point_fields(dtype: np.dtype) -> list[PointField]:
     return fields
 
 
-POINT_FIELDS = tuple(point_fields(POINT_DTYPE))
-"""The fields of ``paper/points``, in offset order."""
-
-
 def message_data(shape: tuple, dtype: np.dtype) -> tuple[array.array, np.ndarray]:
     """A message's ``data`` (zeroed ``array('B')``) and a writable numpy view of it as
     ``shape`` of ``dtype``: fill the view, then set ``data``; no copy of the bytes."""

@@ -24,6 +24,7 @@ from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, Sim
                           SolverConfig, from_mapping)
 from .core.materials import MATERIAL_PRESETS, material_preset
 from .core.scenarios import PIN_MODES, ScenarioCamera
+from .core.simulator import BUCKLING_PROGRESS
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,8 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'Bounds the extra local/global iterations of a squeezed sheet: beyond the '
                   'least, up to this minus the least run before the bending solve and as '
                   'many after it, while held springs are compressed by more than '
-                  'buckling_compression and each iteration takes 1 % of that out.',
+                  f'buckling_compression and each iteration takes '
+                  f'{100 * BUCKLING_PROGRESS:g} % of that out.',
                   (0, 1000)),
     ParameterSpec('solver.buckling_compression', _SOLVER.buckling_compression,
                   'Compression (1 - l/l0) of a held spring that keeps the local/global '
@@ -273,7 +275,6 @@ def parameter_table(cameras=(DEFAULT_CAMERA_NAME,)) -> tuple[ParameterSpec, ...]
 
 PARAMETERS = parameter_table()
 """The table of a node with the default camera list."""
-PARAMETER_NAMES = tuple(spec.name for spec in PARAMETERS)
 PARAMETER_SPECS = {spec.name: spec for spec in PARAMETERS}
 
 

@@ -20,7 +20,7 @@ from paper_sim_ros.msg_adapters.marker_cdr import CdrWriter, serialize_marker_ar
 from paper_sim_ros.msg_adapters.markers import (PROBE_NS, SPRING_NS, SURFACE_NS, MarkerStyle,
                                                 colors_from_array, points_from_array,
                                                 sheet_markers, sheet_markers_cdr)
-from paper_sim_ros.msg_adapters.point_cloud import (POINT_DTYPE, POINT_FIELDS, create_cloud,
+from paper_sim_ros.msg_adapters.point_cloud import (POINT_DTYPE, create_cloud,
                                                     dense_surface_points, read_points,
                                                     sheet_points)
 
@@ -53,11 +53,11 @@ def test_cloud_field_layout_is_exact():
                 ('normal_y', 16, PointField.FLOAT32), ('normal_z', 20, PointField.FLOAT32),
                 ('label', 24, PointField.UINT16), ('u', 28, PointField.FLOAT32),
                 ('v', 32, PointField.FLOAT32)]
-    actual = [(field.name, field.offset, field.datatype) for field in POINT_FIELDS]
-    assert actual == expected
-    assert all(field.count == 1 for field in POINT_FIELDS)
-    assert POINT_DTYPE.itemsize == 36
     cloud = create_cloud(HEADER, sheet_points(*random_points(10)))
+    actual = [(field.name, field.offset, field.datatype) for field in cloud.fields]
+    assert actual == expected
+    assert all(field.count == 1 for field in cloud.fields)
+    assert POINT_DTYPE.itemsize == 36
     assert (cloud.height, cloud.width, cloud.point_step, cloud.row_step) == (1, 10, 36, 360)
     assert cloud.is_bigendian is False and cloud.is_dense is True
     assert len(cloud.data) == 360

@@ -13,8 +13,8 @@ from paper_sim_ros.core.materials import MATERIAL_PRESETS
 from paper_sim_ros.core.scenarios import pin_mask
 from paper_sim_ros.core.sheet import build_flat_sheet
 from paper_sim_ros.node import Schedule
-from paper_sim_ros.node_parameters import (PARAMETER_NAMES, PARAMETER_SPECS, PARAMETERS,
-                                           declared_defaults, settings_from_values)
+from paper_sim_ros.node_parameters import (PARAMETER_SPECS, PARAMETERS, declared_defaults,
+                                           settings_from_values)
 from ros_harness import CONFIG
 
 
@@ -33,7 +33,7 @@ def flatten(mapping: dict, prefix: str = '') -> dict:
 
 
 def test_every_parameter_is_described_once_with_a_range_where_numeric():
-    assert len(PARAMETER_NAMES) == len(set(PARAMETER_NAMES))
+    assert len(PARAMETER_SPECS) == len(PARAMETERS)
     for spec in PARAMETERS:
         assert spec.description.strip(), spec.name
         numeric = isinstance(spec.default, (int, float)) and not isinstance(spec.default, bool)
@@ -54,7 +54,7 @@ def test_the_shipped_parameter_file_names_only_declared_parameters():
     document = yaml.safe_load(CONFIG.read_text())
     assert list(document) == ['/paper_sim']
     values = flatten(document['/paper_sim']['ros__parameters'])
-    unknown = sorted(set(values) - set(PARAMETER_NAMES))
+    unknown = sorted(set(values) - set(PARAMETER_SPECS))
     assert not unknown, f'parameters in {CONFIG.name} that the node does not declare: {unknown}'
     merged = {**defaults(), **values}
     settings = settings_from_values(merged)

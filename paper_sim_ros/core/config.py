@@ -94,8 +94,8 @@ class SolverConfig:
     """Bounds the extra local/global iterations of a squeezed sheet: beyond
     ``projective_iterations``, up to this minus ``projective_iterations`` run before the
     bending solve and as many after it, while held springs are compressed by more than
-    ``buckling_compression`` and each iteration still takes 1 % of that compression out
-    (the sheet is buckling)."""
+    ``buckling_compression`` and each iteration still takes ``BUCKLING_PROGRESS``
+    (core/simulator.py) of that compression out (the sheet is buckling)."""
     buckling_compression: float = 0.01
     """Compression (1 - l/l0) of a held spring that keeps the local/global iterations going
     (a squeezed sheet buckles as they turn the springs' targets; docs/solver.md)."""
