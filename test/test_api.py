@@ -85,7 +85,7 @@ def test_load_scenario_takes_a_name_a_file_or_a_mapping(tmp_path):
     assert (by_name.name, by_file.name, by_mapping.name) == ('press', 'my_press', 'custom')
     assert by_name.config.sheet.nx == by_file.config.sheet.nx == by_mapping.config.sheet.nx == 9
     assert by_file.probes[0].radius == 0.01
-    with pytest.raises(ValueError, match='unknown scenario'):
+    with pytest.raises(ValueError, match='neither a built-in'):
         core.load_scenario('no_such_scenario')
 
 

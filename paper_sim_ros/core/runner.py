@@ -37,22 +37,24 @@ def load_scenario(source: str | os.PathLike | Mapping[str, Any], *, grid: int | 
     if isinstance(source, Mapping):
         mapping = copy.deepcopy(dict(source))
     else:
-        mapping = _scenario_file_mapping(os.fspath(source))
+        mapping = scenario_file_mapping(os.fspath(source))
     mapping = with_overrides(mapping, grid=grid, duration=duration, dt=dt, substeps=substeps,
                              seed=seed, method=method, damage_enabled=damage_enabled,
                              material=material)
     return scenario_from_mapping(mapping)
 
 
-def _scenario_file_mapping(name_or_path: str) -> dict:
-    """A built-in scenario by name, or a scenario YAML file (named after the file unless it
-    says otherwise)."""
+def scenario_file_mapping(name_or_path: str, folder: str = '') -> dict:
+    """The mapping of a built-in scenario by name, or of a scenario YAML file (relative to
+    ``folder``), named after the file unless it says otherwise. Raises ``ValueError``
+    (neither, malformed YAML, not a mapping)."""
     if name_or_path in BUILTIN_SCENARIOS:
         return builtin_mapping(name_or_path)
-    if not os.path.isfile(name_or_path):
-        raise ValueError(f'unknown scenario {name_or_path!r} (not a built-in: '
-                         f'{", ".join(BUILTIN_SCENARIOS)}; not a file)')
-    with open(name_or_path, encoding='utf-8') as stream:
+    path = os.path.join(folder, name_or_path)
+    if not os.path.isfile(path):
+        raise ValueError(f'scenario {name_or_path!r} is neither a built-in '
+                         f'({", ".join(BUILTIN_SCENARIOS)}) nor a file (looked for {path})')
+    with open(path, encoding='utf-8') as stream:
         try:
             mapping = yaml.safe_load(stream)
         except yaml.YAMLError as error:

@@ -30,7 +30,8 @@ from typing import Any, Callable
 
 import yaml
 
-from ..core.scenarios import BUILTIN_SCENARIOS, builtin_mapping, with_overrides
+from ..core.runner import scenario_file_mapping
+from ..core.scenarios import with_overrides
 
 SPEC_KEYS = ('scenarios', 'sweep', 'outputs')
 OUTPUT_KEYS = ('bag', 'rrd')
@@ -176,22 +177,7 @@ def _scenario_entry(entry: Any, folder: str) -> tuple[str, dict]:
         return 'inline', dict(entry)
     if not isinstance(entry, str):
         raise ValueError(f'a scenario entry must be a name, a file or a mapping, got {entry!r}')
-    if entry in BUILTIN_SCENARIOS:
-        return entry, builtin_mapping(entry)
-    path = os.path.join(folder, entry)
-    if not os.path.isfile(path):
-        raise ValueError(f'scenario {entry!r} is neither a built-in '
-                         f'({", ".join(BUILTIN_SCENARIOS)}) nor a file (looked for {path})')
-    with open(path, encoding='utf-8') as stream:
-        try:
-            mapping = yaml.safe_load(stream)
-        except yaml.YAMLError as error:
-            raise ValueError(f'{entry}: malformed YAML: {error}'.splitlines()[0]) from None
-    if not isinstance(mapping, dict):
-        raise ValueError(f'{entry}: a scenario file must hold a mapping')
-    # named after its file unless it says otherwise, as paper_sim_headless --scenario FILE
-    mapping.setdefault('name', os.path.splitext(os.path.basename(entry))[0])
-    return entry, mapping
+    return entry, scenario_file_mapping(entry, folder)
 
 
 def _sweep(sweep: Any) -> tuple[tuple[str, tuple], ...]:
