@@ -81,8 +81,8 @@ def points_from_array(positions: np.ndarray) -> list[Point]:
 
     The fastest legal construction measured (bench/bench_adapters.py): ``tolist()`` once,
     then the generated class's keyword constructor in a comprehension. (Writing the private
-    ``_x`` slots directly is about 3x faster but relies on generated internals; a numpy
-    record array is accepted by the serialiser through duck typing but is 10x slower.)
+    ``_x`` slots directly is faster but relies on generated internals; a numpy record
+    array is accepted by the serialiser through duck typing but is slower.)
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 2 or positions.shape[1] != 3:
