@@ -8,9 +8,11 @@ Fig. 12–13 in numbers.
 
 cost: the built-in 'squeeze' stepped with damage on and off; ms per frame for the whole
 step, and the part spent in damage (the check, the mesh surgery and the solver's rebuild
-after a change). fragility: squeeze breaks and folds per φ. psi: the 'crumple' scenario
-with breaks only (no folds), mean ridge height of the creases and the relaxed deviation
-per ψ. substeps: squeeze breaks and relaxed deviation at 1, 2 and 4 sub-steps.
+after a change); mesh changes, and the rebuild's ms per change (factor updates and the
+refactors they pay for, or a refactor each change). fragility: squeeze breaks and folds
+per φ. psi: the 'crumple' scenario with breaks only (no folds), mean ridge height of the
+creases and the relaxed deviation per ψ. substeps: squeeze breaks and relaxed deviation at
+1, 2 and 4 sub-steps.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
-from paper_sim_ros.core import build_simulator, relaxed_deviation  # noqa: E402
+from paper_sim_ros.core import build_simulator, projective, relaxed_deviation  # noqa: E402
 from paper_sim_ros.core.metrics import ridge_heights  # noqa: E402
 from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping,  # noqa: E402
                                           with_overrides)
@@ -33,38 +35,60 @@ def run(name: str, grid: int, damage: dict, substeps: int = 1, seed: int = 0):
     mapping['damage'] = damage
     scenario = scenario_from_mapping(mapping)
     simulator = build_simulator(scenario)
-    spent = {'damage': 0.0}
+    spent = {'damage': 0.0, 'rebuild': 0.0, 'changes': 0, 'depth': 0}
     advance, rebuild = simulator.damage.advance, simulator.topology_changed
+    factor = simulator._factor_global_steps
 
-    def timed(function):
+    def timed(function, *keys):
         def wrapper(*args, **kwargs):
+            spent['depth'] += 1
             started = time.perf_counter()
             try:
                 return function(*args, **kwargs)
             finally:
-                spent['damage'] += time.perf_counter() - started
+                spent['depth'] -= 1
+                if spent['depth'] == 0:  # a refactor inside a rebuild counts once
+                    for key in keys:
+                        spent[key] += time.perf_counter() - started
         return wrapper
 
-    simulator.damage.advance = timed(advance)
-    simulator.topology_changed = timed(rebuild)
+    def counted(function):
+        def wrapper(*args, **kwargs):
+            spent['changes'] += 1
+            return function(*args, **kwargs)
+        return wrapper
+
+    simulator.damage.advance = timed(advance, 'damage')
+    simulator.topology_changed = counted(timed(rebuild, 'damage', 'rebuild'))
+    # the factors renewed once their updates have cost as much (projective.UpdatedStep)
+    simulator._factor_global_steps = timed(factor, 'damage', 'rebuild')
     dt = scenario.config.solver.dt
     started = time.perf_counter()
     for frame in range(scenario.frame_count):
         simulator.set_probes(*scenario.probe_inputs((frame + 1) * dt))
         simulator.step_frame()
-    return simulator, scenario.frame_count, time.perf_counter() - started, spent['damage']
+    return (simulator, scenario.frame_count, time.perf_counter() - started, spent['damage'],
+            spent['changes'], spent['rebuild'])
 
 
 def cost(grids: list[int]) -> None:
     run('squeeze', 17, {})  # warm-up: numba compilation
-    print('| grid | damage | ms/frame | of which damage | breaks | folds | vertices |')
-    print('|---|---|---|---|---|---|---|')
+    print('| grid | damage | ms/frame | of which damage | mesh changes | ms per change '
+          '| breaks | folds | vertices |')
+    print('|---|---|---|---|---|---|---|---|---|')
+    update_limit = projective.MAX_UPDATE_VERTICES
     for grid in grids:
-        for enabled in (False, True):
-            simulator, frames, total, damage = run('squeeze', grid, {'enabled': enabled})
-            print(f'| {grid} | {"on" if enabled else "off"} | {1e3 * total / frames:.2f} '
-                  f'| {1e3 * damage / frames:.2f} | {simulator.breaks} | {simulator.folds} '
-                  f'| {simulator.sheet.vertex_count} |')
+        for enabled, updates in ((False, True), (True, True), (True, False)):
+            # without updates, every mesh change factors both systems afresh
+            projective.MAX_UPDATE_VERTICES = update_limit if updates else 0
+            simulator, frames, total, damage, changes, rebuilt = run(
+                'squeeze', grid, {'enabled': enabled})
+            label = 'on' if updates else 'on, refactor each change'
+            print(f'| {grid} | {label if enabled else "off"} | {1e3 * total / frames:.2f} '
+                  f'| {1e3 * damage / frames:.2f} | {changes} '
+                  f'| {1e3 * rebuilt / max(changes, 1):.1f} | {simulator.breaks} '
+                  f'| {simulator.folds} | {simulator.sheet.vertex_count} |')
+    projective.MAX_UPDATE_VERTICES = update_limit
 
 
 def fragility(grids: list[int], phis: list[float]) -> None:
