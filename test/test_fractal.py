@@ -25,10 +25,31 @@ def test_grid_exponent_needs_two_to_the_n_plus_one():
     for bad in (2, 4, 64, 66, 100):
         with pytest.raises(ValueError, match='2\\^N \\+ 1'):
             grid_exponent(bad)
-    with pytest.raises(ValueError, match='2\\^N \\+ 1'):
-        build_aged_sheet(SheetConfig(nx=64, ny=64), 0.01, None, 0)
-    with pytest.raises(ValueError, match='square'):
-        build_aged_sheet(SheetConfig(nx=33, ny=65), 0.01, None, 0)
+
+
+@pytest.mark.parametrize('nx, ny', [(40, 29), (33, 65), (64, 64)])
+def test_an_aged_sheet_on_any_grid_samples_the_next_fractal_grid(nx, ny):
+    """On a grid other than (2^N + 1)² the filtered surface of the next such grid is
+    sampled at the sheet's vertices: the same waviness as there (amplitude within a
+    factor of two), a valid sheet at rest in it, its corner heights those of that grid,
+    the same seed the same sheet."""
+    config = SheetConfig(nx=nx, ny=ny)
+    aged = build_aged_sheet(config, 0.01, None, seed=2)
+    assert aged.vertex_count == nx * ny
+    for kind in np.unique(aged.spring_kind):
+        np.testing.assert_allclose(aged.strain(kind), 0.0, atol=1e-12)
+    side = 2 ** (max(nx, ny) - 2).bit_length() + 1
+    reference = aged_surface(SheetConfig(nx=side, ny=side), 0.01, None, 2)
+    assert 0.5 < np.ptp(aged.positions[:, 2]) / np.ptp(reference[..., 2]) < 2.0
+    corners = aged.positions.reshape(ny, nx, 3)[[0, 0, -1, -1], [0, -1, 0, -1], 2]
+    np.testing.assert_allclose(corners, reference[[0, 0, -1, -1], [0, -1, 0, -1], 2],
+                               atol=1e-12)
+    again = build_aged_sheet(config, 0.01, None, seed=2)
+    np.testing.assert_array_equal(aged.positions, again.positions)
+    # cell edges along x restored to width / (nx - 1) on the sheet's own grid
+    grid = aged.positions.reshape(ny, nx, 3)
+    edge = np.linalg.norm(np.diff(grid[:, :, [0, 2]], axis=1), axis=2)
+    np.testing.assert_allclose(edge, config.width / (nx - 1), rtol=1e-9)
 
 
 def test_invalid_parameters_are_refused():

@@ -28,6 +28,10 @@ Decisions where the paper is silent (SPEC: "write the decision down next to the 
   ``test_fractal`` measures it).
 - The aged sheet touches ``z = SheetConfig.elevation`` with its lowest vertex (it lies
   on a table at that height), instead of being centred on it.
+- Any grid, not only ``(2^N + 1)²``: the filtered surface of the smallest such grid with at
+  least as many vertices a side is sampled bilinearly at the sheet's vertices (corners on
+  corners), then its side lengths are restored on the sheet's own grid. On a
+  ``(2^N + 1)²`` grid nothing is resampled.
 """
 from __future__ import annotations
 
@@ -193,6 +197,19 @@ def restore_side_lengths(heights: np.ndarray, width: float, height: float) -> np
     return np.stack([x, y, heights], axis=-1)
 
 
+def resample(field: np.ndarray, rows: int, columns: int) -> np.ndarray:
+    """Bilinear samples ``(rows, columns)`` of a 2-D field at evenly spaced points spanning
+    it, corners on corners."""
+    def weights(size: int, count: int):
+        t = np.linspace(0.0, size - 1.0, count)
+        k = np.minimum(t.astype(np.int64), size - 2)
+        return k, t - k
+    k, f = weights(field.shape[0], rows)
+    along_rows = field[k] * (1.0 - f)[:, None] + field[k + 1] * f[:, None]
+    k, f = weights(field.shape[1], columns)
+    return along_rows[:, k] * (1.0 - f)[None, :] + along_rows[:, k + 1] * f[None, :]
+
+
 def outline_area(grid_positions: np.ndarray) -> float:
     """Area [m²] of the sheet's outline seen from above: the polygon through the border
     vertices of a ``(ny, nx, 3)`` grid (shoelace formula)."""
@@ -208,15 +225,17 @@ def aged_surface(config: SheetConfig, amplitude: float, levels: int | None,
     """The aged-paper rest shape: ``(ny, nx, 3)`` positions [m], fractal heights after
     ``levels`` iterations, low-pass filtered, side lengths restored, lowest vertex at
     ``config.elevation``."""
-    if config.nx != config.ny:
-        raise ValueError(f'the fractal surface needs a square grid (nx == ny == 2^N + 1), '
-                         f'got nx={config.nx}, ny={config.ny}')
-    exponent = grid_exponent(config.nx)
-    if config.nx < LOWPASS_TAPS.size - 2:
+    smallest = min(config.nx, config.ny)
+    if smallest < LOWPASS_TAPS.size - 2:
         raise ValueError(f'the fractal surface needs at least {LOWPASS_TAPS.size - 2} '
                          f'vertices a side (the low-pass filter is {LOWPASS_TAPS.size} wide), '
-                         f'got {config.nx}')
+                         f'got {smallest}')
+    # on any other grid: the surface of the smallest (2^N + 1)² grid at least as fine,
+    # sampled bilinearly at the sheet's vertices
+    exponent = (max(config.nx, config.ny) - 2).bit_length()
     heights = lowpass_filter(fractal_heights(exponent, amplitude, seed, levels))
+    if heights.shape != (config.ny, config.nx):
+        heights = resample(heights, config.ny, config.nx)
     heights -= heights.min()
     grid = restore_side_lengths(heights, config.width, config.height)
     grid[..., 2] += config.elevation
@@ -228,7 +247,8 @@ def build_aged_sheet(config: SheetConfig, amplitude: float, levels: int | None,
     """An "aged paper" sheet (SPEC §5 a) at rest in its fractal shape: springs and masses are
     measured on the displaced surface. ``amplitude`` is d_max [m], the bound of the first
     (corner) iteration; ``levels`` the number of iterations (None: all N + 1). Amplitude 0
-    (or 0 levels) gives exactly ``build_flat_sheet(config)``. Needs nx == ny == 2^N + 1."""
+    (or 0 levels) gives exactly ``build_flat_sheet(config)``. On a grid other than
+    (2^N + 1)², the surface of the next such grid, sampled at the sheet's vertices."""
     amplitude = _check_amplitude(amplitude)
     grid = aged_surface(config, amplitude, levels, seed)
     if amplitude == 0.0 or levels == 0:
