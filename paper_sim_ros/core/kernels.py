@@ -516,6 +516,102 @@ def _probe_depth(positions, v, probe_center, probe_radius, probe_active, ground_
 
 
 @njit(cache=True)
+def angular_momentum(positions, velocities, mass):
+    """The angular momentum (3,) [kg·m²/s] of the vertices about their centre of mass."""
+    total = 0.0
+    centre = np.zeros(3)
+    drift = np.zeros(3)
+    for v in range(positions.shape[0]):
+        total += mass[v]
+        for a in range(3):
+            centre[a] += mass[v] * positions[v, a]
+            drift[a] += mass[v] * velocities[v, a]
+    centre /= total
+    drift /= total
+    momentum = np.zeros(3)
+    for v in range(positions.shape[0]):
+        rx = positions[v, 0] - centre[0]
+        ry = positions[v, 1] - centre[1]
+        rz = positions[v, 2] - centre[2]
+        ux = velocities[v, 0] - drift[0]
+        uy = velocities[v, 1] - drift[1]
+        uz = velocities[v, 2] - drift[2]
+        momentum[0] += mass[v] * (ry * uz - rz * uy)
+        momentum[1] += mass[v] * (rz * ux - rx * uz)
+        momentum[2] += mass[v] * (rx * uy - ry * ux)
+    return momentum
+
+
+@njit(cache=True)
+def remove_angular_momentum(positions, velocities, mass, excess, h, vertical_only):
+    """Turn the sheet rigidly about its centre of mass so that its angular momentum drops
+    by ``excess`` [kg·m²/s]: v −= ω × r and x −= h ω × r, which take (I + h B) ω out of it
+    (I: the inertia tensor about the centre; B = Σ m (r vᵀ − (r·v) 1): the turned positions'
+    lever arms), so ω = (I + h B)⁻¹ excess; with ``vertical_only``, about the vertical
+    through the centre (heights unchanged). Skipped for a sheet with no rotational inertia
+    to speak of (a line)."""
+    total = 0.0
+    centre = np.zeros(3)
+    for v in range(positions.shape[0]):
+        total += mass[v]
+        for a in range(3):
+            centre[a] += mass[v] * positions[v, a]
+    centre /= total
+    system = np.zeros((3, 3))
+    trace = 0.0
+    for v in range(positions.shape[0]):
+        r = (positions[v, 0] - centre[0], positions[v, 1] - centre[1],
+             positions[v, 2] - centre[2])
+        u = (velocities[v, 0], velocities[v, 1], velocities[v, 2])
+        squared = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+        along = r[0] * u[0] + r[1] * u[1] + r[2] * u[2]
+        trace += 2.0 * mass[v] * squared
+        for a in range(3):
+            for b in range(3):
+                diagonal = squared - h * along if a == b else 0.0
+                system[a, b] += mass[v] * (diagonal - r[a] * r[b] + h * r[a] * u[b])
+    if vertical_only:
+        if system[2, 2] > 1e-9 * trace:
+            _turn(positions, velocities, centre, 0.0, 0.0, excess[2] / system[2, 2], h)
+        return
+    # (I + h B)⁻¹ by cofactors: the same bits everywhere
+    c00 = system[1, 1] * system[2, 2] - system[1, 2] * system[2, 1]
+    c01 = system[1, 2] * system[2, 0] - system[1, 0] * system[2, 2]
+    c02 = system[1, 0] * system[2, 1] - system[1, 1] * system[2, 0]
+    c10 = system[0, 2] * system[2, 1] - system[0, 1] * system[2, 2]
+    c11 = system[0, 0] * system[2, 2] - system[0, 2] * system[2, 0]
+    c12 = system[0, 1] * system[2, 0] - system[0, 0] * system[2, 1]
+    c20 = system[0, 1] * system[1, 2] - system[0, 2] * system[1, 1]
+    c21 = system[0, 2] * system[1, 0] - system[0, 0] * system[1, 2]
+    c22 = system[0, 0] * system[1, 1] - system[0, 1] * system[1, 0]
+    determinant = system[0, 0] * c00 + system[0, 1] * c01 + system[0, 2] * c02
+    if not abs(determinant) > 1e-9 * trace * trace * trace:
+        return
+    wx = (c00 * excess[0] + c10 * excess[1] + c20 * excess[2]) / determinant
+    wy = (c01 * excess[0] + c11 * excess[1] + c21 * excess[2]) / determinant
+    wz = (c02 * excess[0] + c12 * excess[1] + c22 * excess[2]) / determinant
+    _turn(positions, velocities, centre, wx, wy, wz, h)
+
+
+@njit(cache=True)
+def _turn(positions, velocities, centre, wx, wy, wz, h):
+    """v −= ω × r, x −= h ω × r about ``centre``."""
+    for v in range(positions.shape[0]):
+        rx = positions[v, 0] - centre[0]
+        ry = positions[v, 1] - centre[1]
+        rz = positions[v, 2] - centre[2]
+        ux = wy * rz - wz * ry
+        uy = wz * rx - wx * rz
+        uz = wx * ry - wy * rx
+        velocities[v, 0] -= ux
+        velocities[v, 1] -= uy
+        velocities[v, 2] -= uz
+        positions[v, 0] -= h * ux
+        positions[v, 1] -= h * uy
+        positions[v, 2] -= h * uz
+
+
+@njit(cache=True)
 def all_finite(values):
     for x in values.ravel():
         if not np.isfinite(x):

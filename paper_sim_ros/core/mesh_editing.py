@@ -14,6 +14,9 @@ from .topology import vertex_normals
 
 MAX_CREASE_FOLD = 0.95
 """A crease lifts m by at most this × l0/2 (the two halves then meet at ~36°)."""
+FLAT_FOLD_RATIO = 0.05
+"""A fold pressed flat keeps its two sides this share of their flat distance apart (paper
+has a thickness; a spring of zero rest length has no direction and no strain)."""
 FLAT_BULGE = 1e-3
 """|Δn · d̂| below which the sheet counts as flat across an edge and the side is random."""
 
@@ -322,10 +325,12 @@ class MeshEditor:
     # ------------------------------------------------------------------------- folding
     def fold(self, spring: int, rest_length: float | None = None) -> None:
         """The BEND spring across an edge becomes an AUX spring (Fig. 6) of rest length
-        ``rest_length`` (default: its length now): the fold stays."""
+        ``rest_length`` (default: its length now, at least FLAT_FOLD_RATIO of its rest
+        length): the fold stays."""
         self.kind.data[spring] = AUX
-        self.rest_length.data[spring] = self.length(spring) if rest_length is None \
-            else rest_length
+        floor = FLAT_FOLD_RATIO * float(self.rest_length.data[spring])
+        self.rest_length.data[spring] = max(
+            self.length(spring) if rest_length is None else rest_length, floor)
         self.stiffness.data[spring] = self.aux_stiffness
         self.changed = True
 

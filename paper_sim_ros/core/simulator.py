@@ -51,6 +51,13 @@ FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
 GRIP_ROW, CONTACT_ROW = 0, 1
 """Kinds of the solves' constraint rows (Simulator._set_contact_rows)."""
+SPIN_NONE, SPIN_VERTICAL, SPIN_ALL = 0, 1, 2
+"""Which angular momentum a sub-step keeps (Simulator._spin_kept): none, the vertical
+component, all of it."""
+SPIN_ROUNDS = 3
+SPIN_TOLERANCE = 1e-12
+"""Rounds of Simulator._keep_angular_momentum at most, until the angular momentum is kept
+to this share."""
 CONTACT_ROW_PASSES = 3
 """Solves per local/global iteration, at most, while its contact rows settle (rows that
 pull let go, vertices carried into a probe given one: Simulator._settle_contact_rows)."""
@@ -278,6 +285,9 @@ class Simulator:
             if contact.ground_enabled:
                 kernels.table_friction(velocities, self._table_support,
                                        contact.ground_friction, h)
+            spin_kept = self._spin_kept()
+            if spin_kept:
+                momentum = kernels.angular_momentum(positions, velocities, sheet.vertex_mass)
             self._projective_step(h, probe_from, probe_to, start_positions)
         else:
             self._force_step(h)
@@ -300,7 +310,9 @@ class Simulator:
             if np.any(self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)):
                 carried |= touched
             inverse_mass = np.where(carried, 0.0, self._inverse_mass)
-            if self.config.contact.ground_enabled:
+            # a sheet pushed together on the table can only buckle up; one lying there
+            # crumpled is not being pushed (lifting it would keep it moving for ever)
+            if self.config.contact.ground_enabled and np.any(self.probes.active):
                 kernels.lift_squeezed(positions, inverse_mass, self._constraint_ends,
                                       self._constraint_rest, self.config.contact.ground_height,
                                       self.config.solver.buckling_compression)
@@ -309,6 +321,46 @@ class Simulator:
         # velocities from the positions actually reached
         velocities[:] = (positions - start_positions) / h
         velocities[sheet.pinned] = 0.0
+        if constrained and spin_kept and spin_kept == self._spin_kept():
+            self._keep_angular_momentum(momentum * (1.0 - h * self.config.solver.air_damping),
+                                        h, spin_kept == SPIN_VERTICAL)
+
+    def _spin_kept(self) -> int:
+        """Which angular momentum about its centre of mass the sheet keeps through a
+        sub-step, but for air drag: all of it in free flight (nothing but gravity and air
+        acts on it: no pin, no active probe, off the table); about the vertical on the
+        table with nothing else touching it (the table's friction, applied to the
+        velocities before, is in the momentum kept; its push is vertical); else none."""
+        if np.any(self.sheet.pinned) or np.any(self.probes.active):
+            return SPIN_NONE
+        contact = self.config.contact
+        if contact.ground_enabled \
+                and self.sheet.positions[:, 2].min() <= contact.ground_height + TABLE_TOLERANCE:
+            return SPIN_VERTICAL
+        return SPIN_ALL
+
+    def _keep_angular_momentum(self, momentum, h, vertical_only: bool) -> None:
+        """The sheet's own forces have no net torque. Those of a sub-step do: each spring's
+        target lies along its edge before the solve, not after it, and each hinge's along
+        its rest shape turned into its frame, not along its curvature; and a crumpled
+        sheet's held springs cannot all be met, so the passes pull against each other
+        every sub-step. Left in, a crumpled sheet spins up until air drag holds it (0.8
+        rad/s at 33², seed 0, whatever the drag), or spins on the table (3 rad/s), and
+        never comes to rest. What the sub-step made of the angular momentum ``momentum``
+        should be is taken out by turning the sheet rigidly (about the vertical through
+        its centre of mass only, on the table: ``kernels.remove_angular_momentum``)."""
+        sheet = self.sheet
+        # turning the positions with the velocities moves the lever arms too: a few rounds
+        for _ in range(SPIN_ROUNDS):
+            excess = kernels.angular_momentum(sheet.positions, sheet.velocities,
+                                              sheet.vertex_mass) - momentum
+            if vertical_only:
+                excess[:2] = 0.0
+            if not (np.all(np.isfinite(excess)) and np.linalg.norm(excess)
+                    > SPIN_TOLERANCE * np.linalg.norm(momentum)):
+                return
+            kernels.remove_angular_momentum(sheet.positions, sheet.velocities,
+                                            sheet.vertex_mass, excess, h, vertical_only)
 
     def _force_step(self, h: float) -> None:
         """Every spring a force: the paper's Eq. 6 Jacobi iteration, or symplectic Euler."""
