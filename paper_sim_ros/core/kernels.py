@@ -516,18 +516,22 @@ def _probe_depth(positions, v, probe_center, probe_radius, probe_active, ground_
 
 
 @njit(cache=True)
-def angular_momentum(positions, velocities, mass):
-    """The angular momentum (3,) [kg·m²/s] of the vertices about their centre of mass."""
+def _mass_average(values, mass):
+    """Σ m x / Σ m over the vertices (3,): the centre of mass, or its velocity."""
     total = 0.0
-    centre = np.zeros(3)
-    drift = np.zeros(3)
-    for v in range(positions.shape[0]):
+    average = np.zeros(3)
+    for v in range(values.shape[0]):
         total += mass[v]
         for a in range(3):
-            centre[a] += mass[v] * positions[v, a]
-            drift[a] += mass[v] * velocities[v, a]
-    centre /= total
-    drift /= total
+            average[a] += mass[v] * values[v, a]
+    return average / total
+
+
+@njit(cache=True)
+def angular_momentum(positions, velocities, mass):
+    """The angular momentum (3,) [kg·m²/s] of the vertices about their centre of mass."""
+    centre = _mass_average(positions, mass)
+    drift = _mass_average(velocities, mass)
     momentum = np.zeros(3)
     for v in range(positions.shape[0]):
         rx = positions[v, 0] - centre[0]
@@ -550,13 +554,7 @@ def remove_angular_momentum(positions, velocities, mass, excess, h, vertical_onl
     lever arms), so ω = (I + h B)⁻¹ excess; with ``vertical_only``, about the vertical
     through the centre (heights unchanged). Skipped for a sheet with no rotational inertia
     to speak of (a line)."""
-    total = 0.0
-    centre = np.zeros(3)
-    for v in range(positions.shape[0]):
-        total += mass[v]
-        for a in range(3):
-            centre[a] += mass[v] * positions[v, a]
-    centre /= total
+    centre = _mass_average(positions, mass)
     system = np.zeros((3, 3))
     trace = 0.0
     for v in range(positions.shape[0]):

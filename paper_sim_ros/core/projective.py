@@ -15,6 +15,8 @@ vertex per sweep. That reach is what paper's stiffness needs (SPEC §2).
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 from numba import njit
 import scipy.sparse as sparse
@@ -299,14 +301,7 @@ class UpdatedStep:
             self._columns[known, :previous._columns.shape[1]] = \
                 previous._columns[row_of[touched[known]]]
         missing = np.flatnonzero(~known)
-        unit = np.zeros((count, 3))
-        response = np.zeros((count, 3))
-        for start in range(0, missing.size, 3):
-            batch = missing[start:start + 3]
-            unit[:] = 0.0
-            unit[touched[batch], np.arange(batch.size)] = 1.0
-            self._solve_extended(unit, response)
-            self._columns[batch] = response[:, :batch.size].T
+        self._columns[missing] = unit_responses(self._solve_extended, touched[missing], count)
         # x_T's map: Δ (Z_TT⁻¹ + Δ)⁻¹ Z_TT⁻¹, so that x = x₀ − Z (map x₀_T)
         self._map = np.empty((touched.size, touched.size))
         _woodbury_map(self._columns[:, touched], change, self._map)
@@ -419,6 +414,22 @@ def _subtract_columns(columns, weight, used, positions):
                 positions[v, 2] -= z * w2
 
 
+def unit_responses(solve: Callable[[np.ndarray, np.ndarray], None], vertices: np.ndarray,
+                   vertex_count: int) -> np.ndarray:
+    """(len(vertices), V): the columns A⁻¹ e_v of ``solve`` (rhs, positions), three per
+    solve (one on each axis), the pinned vertices at zero."""
+    columns = np.zeros((vertices.size, vertex_count))
+    unit = np.zeros((vertex_count, 3))
+    response = np.zeros((vertex_count, 3))
+    for start in range(0, vertices.size, 3):
+        batch = vertices[start:start + 3]
+        unit[:] = 0.0
+        unit[batch, np.arange(batch.size)] = 1.0
+        solve(unit, response)
+        columns[start:start + batch.size] = response[:, :batch.size].T
+    return columns
+
+
 class ConstrainedSolve:
     """A global step's solution with some vertices constrained, without a new factor: each
     constraint row r asks dᵣ · x[vᵣ] = cᵣ (a held vertex is three rows, e_x, e_y, e_z; a
@@ -452,17 +463,10 @@ class ConstrainedSolve:
             grown = np.zeros((max(needed, 2 * self._columns.shape[0], 16), vertex_count))
             grown[:self._column_count] = self._columns[:self._column_count]
             self._columns = grown
-        unit = np.zeros((vertex_count, 3))
-        response = np.zeros((vertex_count, 3))
-        for start in range(0, missing.size, 3):  # three columns per solve
-            batch = missing[start:start + 3]
-            unit[:] = 0.0
-            unit[batch, np.arange(batch.size)] = 1.0
-            self.step.solve(unit, response)
-            for axis, vertex in enumerate(batch):
-                self._columns[self._column_count] = response[:, axis]
-                self._column_of[vertex] = self._column_count
-                self._column_count += 1
+        self._columns[self._column_count:needed] = unit_responses(self.step.solve, missing,
+                                                                  vertex_count)
+        self._column_of[missing] = np.arange(self._column_count, needed)
+        self._column_count = needed
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray, row_vertex: np.ndarray,
               row_direction: np.ndarray, row_value: np.ndarray) -> np.ndarray:

@@ -54,10 +54,6 @@ GRIP_ROW, CONTACT_ROW = 0, 1
 SPIN_NONE, SPIN_VERTICAL, SPIN_ALL = 0, 1, 2
 """Which angular momentum a sub-step keeps (Simulator._spin_kept): none, the vertical
 component, all of it."""
-SPIN_ROUNDS = 3
-SPIN_TOLERANCE = 1e-12
-"""Rounds of Simulator._keep_angular_momentum at most, until the angular momentum is kept
-to this share."""
 CONTACT_ROW_PASSES = 3
 """Solves per local/global iteration, at most, while its contact rows settle (rows that
 pull let go, vertices carried into a probe given one: Simulator._settle_contact_rows)."""
@@ -350,15 +346,9 @@ class Simulator:
         should be is taken out by turning the sheet rigidly (about the vertical through
         its centre of mass only, on the table: ``kernels.remove_angular_momentum``)."""
         sheet = self.sheet
-        # turning the positions with the velocities moves the lever arms too: a few rounds
-        for _ in range(SPIN_ROUNDS):
-            excess = kernels.angular_momentum(sheet.positions, sheet.velocities,
-                                              sheet.vertex_mass) - momentum
-            if vertical_only:
-                excess[:2] = 0.0
-            if not (np.all(np.isfinite(excess)) and np.linalg.norm(excess)
-                    > SPIN_TOLERANCE * np.linalg.norm(momentum)):
-                return
+        excess = kernels.angular_momentum(sheet.positions, sheet.velocities,
+                                          sheet.vertex_mass) - momentum
+        if np.all(np.isfinite(excess)):
             kernels.remove_angular_momentum(sheet.positions, sheet.velocities,
                                             sheet.vertex_mass, excess, h, vertical_only)
 
