@@ -26,6 +26,8 @@ from .spec import Outputs, RunRequest
 
 WAIT_S = 0.5
 """How often the driver redraws the progress bar while no run finishes."""
+JOIN_ATTEMPTS = 2
+"""Attempts to join a cluster by its address before the batch gives up."""
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,16 @@ def connect(address: str | None, workers: int | None) -> Cluster:
         ray.init(num_cpus=workers, include_dashboard=False, **quiet)
         description = 'a local Ray instance'
     else:
-        ray.init(address=address, **quiet)
+        for attempt in range(JOIN_ATTEMPTS):
+            try:
+                ray.init(address=address, **quiet)
+                break
+            except ConnectionError:
+                # a Ray Client server starts one server per driver, which can fail to come
+                # up on a loaded machine ("Starting Ray client server failed"): ask again
+                ray.shutdown()
+                if attempt == JOIN_ATTEMPTS - 1:
+                    raise
         description = f'the Ray cluster at {address}'
     return Cluster(description, float(ray.cluster_resources().get('CPU', 0.0)))
 
