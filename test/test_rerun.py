@@ -6,6 +6,7 @@ import dataclasses
 import json
 import os
 from pathlib import Path
+import shutil
 import signal
 import socket
 import subprocess
@@ -395,13 +396,20 @@ def test_streams_to_a_running_rerun_server(tmp_path):
             simulator.step_frame()
             recorder.log_frame(simulator.time, simulator)
         recorder.close()
+        # read a copy that decodes whole: the server writes on, and a SIGTERM can cut its
+        # last message short
+        snapshot = tmp_path / 'snapshot.rrd'
         deadline = time.monotonic() + 30
-        while _logged_frames(received) < scenario.frame_count and time.monotonic() < deadline:
+        while time.monotonic() < deadline:
+            if received.exists():
+                shutil.copyfile(received, snapshot)
+            if _logged_frames(snapshot) >= scenario.frame_count:
+                break
             time.sleep(0.2)
     finally:
         os.killpg(server.pid, signal.SIGTERM)
         server.wait(10)
-    meshes = rerun_replay.read_mesh_frames(str(received))
+    meshes = rerun_replay.read_mesh_frames(str(snapshot))
     assert len(meshes) == scenario.frame_count
-    assert rerun_replay.read_recording_info(str(received))['scenario']['name'] == 'pinch'
+    assert rerun_replay.read_recording_info(str(snapshot))['scenario']['name'] == 'pinch'
     np.testing.assert_allclose(meshes[-1].positions, simulator.sheet.positions, atol=1e-6)
