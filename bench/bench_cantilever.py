@@ -6,10 +6,11 @@ under its own weight; its tip angle against the elastica of a self-weighted cant
 
 The strip (default office paper: B = 4e-4 N·m, 80 g/m²) is clamped by its first two rows of
 vertices (one pinned row is a hinge, not a clamp), released flat and left to settle with air
-drag 6/s for 4 s. The elastica, θ'' = −(q L³ / B)(1 − s) cos θ, θ(0) = 0, θ'(1) = 0 (s the
-arc length over the overhang L, q the weight per area), is solved by shooting. The tip
-angle is the slope of the strip's last row of cells. A script that prints figures, not a
-test.
+drag 6/s for 4 s. The sheet between the two pinned rows is flat, so the cantilever starts
+at their midpoint: its length L is the overhang beyond the second row plus half a cell.
+The elastica, θ'' = −(q L³ / B)(1 − s) cos θ, θ(0) = 0, θ'(1) = 0 (s the arc length over
+L, q the weight per area), is solved by shooting. The tip angle is the slope of the
+strip's last row of cells. A script that prints figures, not a test.
 """
 from __future__ import annotations
 
@@ -72,7 +73,10 @@ def main() -> None:
     for overhang in args.overhangs:
         for spacing in args.spacings:
             angle, sheet = drooped_tip_angle(overhang, spacing, args.width)
-            load = sheet['grammage'] * GRAVITY * overhang ** 3 / sheet['rigidity']
+            # the strip is flat between its two pinned rows: its slope is zero at their
+            # midpoint, where the discrete cantilever starts
+            span = overhang + 0.5 * spacing
+            load = sheet['grammage'] * GRAVITY * span ** 3 / sheet['rigidity']
             reference = elastica_tip_angle(load)
             print(f'| {1e3 * overhang:.0f} mm | {1e3 * spacing:.1f} mm '
                   f'| {math.degrees(reference):.2f}° | {math.degrees(angle):.2f}° '

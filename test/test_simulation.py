@@ -229,8 +229,10 @@ def test_a_fingertip_pressing_the_sheet_onto_the_table_carries_it_along():
 def test_squeeze_arches_the_sheet_between_the_fingertips(substeps):
     """Two fingertips carry the sheet's ends 44.55 mm inwards each; paper does not shorten,
     so it buckles up between them (Euler), whatever the sub-step count. Measured on 33²
-    just before lift-off: the middle 89.6 mm (1 sub-step) and 88.5 mm (4) above the table;
-    the short edges' middles 44.0–44.2 mm inwards."""
+    just before lift-off: the middle 90 mm above the table, the short edges' middles
+    43 mm inwards with 1 and with 4 sub-steps; their corners lag as the edges bow (with 4
+    sub-steps one corner 9 mm, the other 33 mm: the plate's twist is half what the hinges
+    gave it, issue 14)."""
     squeeze = scenario('squeeze', grid=33, substeps=substeps)
     simulator = build_simulator(squeeze)
     start = simulator.sheet.positions.copy()
@@ -242,12 +244,11 @@ def test_squeeze_arches_the_sheet_between_the_fingertips(substeps):
     middle = np.argmin(np.linalg.norm(start[:, :2], axis=1))
     assert positions[middle, 2] > 0.06, f'the middle is {positions[middle, 2] * 1e3:.1f} mm up'
     # the short edges follow the fingertips, their corners lagging as the edges bow
-    # (measured: corners 24.8 mm and 31.2 mm inwards)
     short_edges = np.abs(start[:, 1]) > start[:, 1].max() - 1e-9
     inwards = np.abs(start[short_edges, 1]) - np.abs(positions[short_edges, 1])
     edge_middles = short_edges & (np.abs(start[:, 0]) < 1e-9)
     inwards_middle = np.abs(start[edge_middles, 1]) - np.abs(positions[edge_middles, 1])
-    assert inwards.min() > 0.02 and inwards_middle.min() > 0.03, (inwards, inwards_middle)
+    assert inwards.min() > 0.005 and inwards_middle.min() > 0.03, (inwards, inwards_middle)
     assert positions[:, 2].min() > -0.0031 and kernels.all_finite(positions)
 
 
@@ -322,11 +323,11 @@ def test_global_step_solves_its_system_with_pins():
     (M/h² + K) x = b over the free vertices, pinned couplings moved to b, for the springs'
     K = Σ k AᵀA and for the bending matrix Q (core/bending.py)."""
     import scipy.sparse as sparse
-    from paper_sim_ros.core.bending import HingeBending
+    from paper_sim_ros.core.bending import SheetBending
     from paper_sim_ros.core.projective import GlobalStep
     sheet, pinned, springs = pinned_springs_system()
     vertex_count = sheet.vertex_count
-    bending = HingeBending(sheet.positions, sheet.triangles, 4e-4,
+    bending = SheetBending(sheet.positions, sheet.triangles, sheet.material, 4e-4,
                            np.zeros((0, 2), dtype=np.int32)).matrix_entries()
     h = 1.0 / 60.0
     rng = np.random.default_rng(7)

@@ -19,6 +19,11 @@ cylinder bent about a grid axis stores ½ B curvature² per unit area. Rest shap
 moment, at a tenth of the stiffness: the crease is remembered (SPEC §4), and weak. A folded
 hinge (SPEC §4.2) stops bending back: its AUX spring holds it.
 
+Hinges alone do not converge to a plate on this grid (core/patches.py says why): where the
+sheet is its intact grid, plate patches bend it, and a hinge bends only the share of its
+two triangles no patch covers: none on a fresh sheet, all where damage (or plastic yield)
+dropped the patches.
+
 Σ k w wᵀ = Q is constant, so the bending step (M/h² + Q) x = M y / h² + Σ k w R κ0 is
 factorised once per mesh change like the springs' global step (core/projective.py), and
 one solve per sub-step carries the sheet's weight by bending at once. For a flat rest
@@ -29,6 +34,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from . import patches
 from .topology import edge_key
 
 FLAT_REST = 1e-9
@@ -249,19 +255,23 @@ def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_cur
     return yielded
 
 
-class HingeBending:
-    """The bending state of one mesh: its hinges, weights, stiffness and rest curvature.
-    Rebuilt whenever the mesh changes; a hinge that survives keeps its rest shape."""
+class SheetBending:
+    """The bending state of one mesh: vertex patches where the sheet is intact
+    (core/patches.py), hinges where damage changed it, their weights, stiffness and rest
+    shapes. Rebuilt whenever the mesh changes; a hinge or patch that survives keeps its
+    rest shape."""
 
-    def __init__(self, positions: np.ndarray, triangles: np.ndarray, rigidity: float,
-                 fold_pairs: np.ndarray, previous: 'HingeBending | None' = None,
-                 keep_stiffness: bool = False) -> None:
-        """``fold_pairs``: (F, 2) vertex pairs of AUX springs; a hinge whose opposite
-        vertices are one of them is a fold. A hinge that ``previous`` had, with the same
-        opposite vertices and fold state, keeps its weights, stiffness and rest curvature;
-        any other is measured now (at reset, with no ``previous``: the rest shape; after
-        damage, a crease: CREASE_STIFFNESS_SHARE, unless ``keep_stiffness``: a copy of the
-        same mesh)."""
+    def __init__(self, positions: np.ndarray, triangles: np.ndarray, material: np.ndarray,
+                 rigidity: float, fold_pairs: np.ndarray,
+                 previous: 'SheetBending | None' = None, keep_stiffness: bool = False) -> None:
+        """``material``: (V, 2) where each vertex sits on the flat sheet [m];
+        ``fold_pairs``: (F, 2) vertex pairs of AUX springs; a hinge whose opposite
+        vertices are one of them is a fold, and a patch holding both is damaged. A hinge
+        that ``previous`` had, with the same opposite vertices and fold state, keeps its
+        weights, stiffness and rest curvature; any other is measured now (at reset, with no
+        ``previous``: the rest shape; after damage, a crease: CREASE_STIFFNESS_SHARE,
+        unless ``keep_stiffness``: a copy of the same mesh). Patches are made at reset
+        only; after it a patch lives on while its neighbourhood is what it was."""
         vertex_count = positions.shape[0]
         self.quads = hinge_quads(triangles, vertex_count)
         count = self.quads.shape[0]
@@ -277,10 +287,79 @@ class HingeBending:
         # a fold is a hinge that gave way: its AUX spring holds it (SPEC §4.2), it no
         # longer bends back
         self.stiffness[self.folded] = 0.0
-        self._curved = np.flatnonzero(np.abs(self.rest_curvature).max(axis=1, initial=0.0)
-                                      > FLAT_REST)
+        self.matrix_changed = False
+        self._triangles = triangles
+        self._material = np.asarray(material, dtype=np.float64)
+        self._rigidity = rigidity
+        self._build_patches(positions, fold_pairs, previous)
+        self._cover()
 
-    def _carry_over(self, previous: 'HingeBending', vertex_count: int,
+    _PATCH_ARRAYS = ('stencil', 'rows', 'tangents', 'is_cell', 'patch_rest')
+
+    def _build_patches(self, positions, fold_pairs, previous) -> None:
+        vertex_count = positions.shape[0]
+        if previous is None:
+            self.stencil, self.rows, self.tangents, self.is_cell = patches.grid_patches(
+                self._material, self._triangles, self.quads)
+            self.patch_rest = np.zeros((self.stencil.shape[0], 3, 3))
+            patches.patch_rest_state(positions, self.stencil, self.rows, self.tangents,
+                                     np.arange(self.stencil.shape[0]), self.patch_rest)
+        else:
+            # a patch lives on only on the mesh pieces it was made on
+            for name in self._PATCH_ARRAYS:
+                setattr(self, name, getattr(previous, name))
+            self._keep_patches(patches.patches_standing(self.stencil, self.is_cell,
+                                                        self._triangles, vertex_count))
+        if fold_pairs.shape[0]:  # a fold or a crease in a patch: damage's, not a plate's
+            self._keep_patches(~patches.patches_tying(self.stencil, fold_pairs.astype(np.int64),
+                                                      vertex_count))
+
+    def _keep_patches(self, kept: np.ndarray) -> None:
+        for name in self._PATCH_ARRAYS:
+            setattr(self, name, getattr(self, name)[kept])
+
+    def _cover(self) -> None:
+        """Who bends which triangle. A triangle is bent by patches where its corners have
+        vertex patches and its cell a cell patch; each vertex patch bends its Voronoi share
+        of those triangles (a third each would weigh a grid's vertices 2:1 by valence, and
+        the sheet would zigzag between them), each cell patch its two triangles. A hinge
+        bends the share of its two triangles that no patch covers."""
+        triangles, vertex_count = self._triangles, self._material.shape[0]
+        centres = self.stencil[~self.is_cell, 0]
+        has_vertex_patch = np.zeros(vertex_count, dtype=bool)
+        has_vertex_patch[centres] = True
+        one, other = patches.cell_triangles(self.stencil[self.is_cell])
+        corners = np.concatenate([one, other])
+        covered_keys = patches.triangle_keys(corners, vertex_count)[
+            np.all(has_vertex_patch[corners], axis=1)]
+        keys = patches.triangle_keys(triangles, vertex_count)
+        covered = np.isin(keys, covered_keys)
+        corner_area = patches.voronoi_areas(self._material, triangles[covered])
+        vertex_area = np.bincount(triangles[covered].ravel(), weights=corner_area.ravel(),
+                                  minlength=vertex_count)
+        triangle_area = dict(zip(keys[covered].tolist(), corner_area.sum(axis=1)))
+        area = np.zeros(self.stencil.shape[0])
+        area[~self.is_cell] = vertex_area[centres]
+        area[self.is_cell] = [
+            triangle_area.get(a, 0.0) + triangle_area.get(b, 0.0)
+            for a, b in zip(patches.triangle_keys(one, vertex_count).tolist(),
+                            patches.triangle_keys(other, vertex_count).tolist())]
+        self.patch_weight = self._rigidity * area
+        self._patches = np.flatnonzero(self.patch_weight > 0.0)
+        curvature = np.abs(self.patch_rest[self._patches]).reshape(-1, 9).max(axis=1,
+                                                                             initial=0.0)
+        self._curved_patches = self._patches[curvature > patches.FLAT_REST]
+        uncovered = (~np.isin(patches.triangle_keys(self.quads[:, [0, 1, 2]], vertex_count),
+                              covered_keys)).astype(int) \
+            + (~np.isin(patches.triangle_keys(self.quads[:, [1, 0, 3]], vertex_count),
+                        covered_keys)).astype(int)
+        self.hinge_share = 0.5 * uncovered
+        self._hinge_stiffness = self.stiffness * self.hinge_share
+        self._curved = np.flatnonzero(
+            (np.abs(self.rest_curvature).max(axis=1, initial=0.0) > FLAT_REST)
+            & (self._hinge_stiffness > 0.0))
+
+    def _carry_over(self, previous: 'SheetBending', vertex_count: int,
                     keep_stiffness: bool) -> None:
         # a hinge is known by its edge; vertex indices never change and only grow, so
         # keys over the current vertex count identify the previous mesh's edges too
@@ -299,29 +378,57 @@ class HingeBending:
             self.stiffness[~same] *= CREASE_STIFFNESS_SHARE
 
     def matrix_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, columns, values) [N/m] of Q = Σ k w wᵀ."""
+        """(rows, columns, values) [N/m] of Q = Σ k w wᵀ over the hinges and Σ w c cᵀ over
+        the patches' rows."""
         rows = np.repeat(self.quads, 4, axis=1).ravel()
         columns = np.tile(self.quads, (1, 4)).ravel()
-        values = (self.stiffness[:, None, None] * self.weights[:, :, None]
+        values = (self._hinge_stiffness[:, None, None] * self.weights[:, :, None]
                   * self.weights[:, None, :]).ravel()
-        return rows, columns, values
+        stencil = self.stencil[self._patches]
+        vertex = np.where(stencil >= 0, stencil, stencil[:, :1])  # padding: 0 coefficients
+        coefficients = self.rows[self._patches]  # (P, 3, K)
+        patch_values = np.einsum('p,pka,pkb->pab', self.patch_weight[self._patches],
+                                 coefficients, coefficients)
+        width = vertex.shape[1]
+        return (np.concatenate([rows, np.repeat(vertex, width, axis=1).ravel()]),
+                np.concatenate([columns, np.tile(vertex, (1, width)).ravel()]),
+                np.concatenate([values, patch_values.ravel()]))
 
     def add_targets(self, positions: np.ndarray, rhs: np.ndarray) -> None:
         """The local step's bending part of the global step's right-hand side."""
-        add_bending_targets(positions, self.quads, self.weights, self.stiffness,
+        add_bending_targets(positions, self.quads, self.weights, self._hinge_stiffness,
                             self.rest_curvature, self._curved, rhs)
+        patches.add_patch_targets(positions, self.stencil, self.rows, self.tangents,
+                                  self.patch_weight, self.patch_rest, self._curved_patches,
+                                  rhs)
 
     def yield_to(self, positions: np.ndarray, yield_curvature: float) -> int:
-        """Let the hinges bent beyond ``yield_curvature`` [1/m] keep the excess as their rest
-        shape (``yield_hinges``); returns how many did. The matrix does not change."""
-        yielded = int(yield_hinges(positions, self.quads, self.weights, self.stiffness,
-                                   self.rest_curvature, yield_curvature))
+        """Plasticity: the hinges bent beyond ``yield_curvature`` [1/m] keep the excess as
+        their rest shape, and a patch bent beyond it is damage: dropped for good, its
+        triangles bent by their hinges from then on (which yield in turn). Returns how many
+        hinges and patches yielded; ``matrix_changed`` tells whether patches were dropped
+        (the bending system must then be factorised again)."""
+        beyond = patches.patches_beyond(positions, self.stencil, self.rows, self.tangents,
+                                        self.patch_rest, self._patches, yield_curvature)
+        self.matrix_changed = bool(beyond.any())
+        if self.matrix_changed:
+            kept = np.ones(self.stencil.shape[0], dtype=bool)
+            kept[self._patches[beyond]] = False
+            self._keep_patches(kept)
+            self._cover()
+        yielded = int(yield_hinges(positions, self.quads, self.weights,
+                                   self._hinge_stiffness, self.rest_curvature,
+                                   yield_curvature))
         if yielded:
-            self._curved = np.flatnonzero(np.abs(self.rest_curvature).max(axis=1, initial=0.0)
-                                          > FLAT_REST)
-        return yielded
+            self._curved = np.flatnonzero(
+                (np.abs(self.rest_curvature).max(axis=1, initial=0.0) > FLAT_REST)
+                & (self._hinge_stiffness > 0.0))
+        return yielded + int(beyond.sum())
 
     def energy(self, positions: np.ndarray) -> float:
-        """Σ ½ k |κ - R κ0|² [J]."""
-        return float(bending_energy(positions, self.quads, self.weights, self.stiffness,
-                                    self.rest_curvature))
+        """Σ ½ k |κ - R κ0|² over the hinges and ½ w |x'' − R r|² over the patches [J]."""
+        return float(bending_energy(positions, self.quads, self.weights,
+                                    self._hinge_stiffness, self.rest_curvature)
+                     + patches.patch_energy(positions, self.stencil, self.rows, self.tangents,
+                                            self.patch_weight, self.patch_rest,
+                                            self._patches))

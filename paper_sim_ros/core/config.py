@@ -50,8 +50,9 @@ class SheetConfig:
     0.297 m); scaled with the cell size so that a sheet bends alike on any grid. The
     'paper' and 'explicit' solvers' bending; 'constrained' bends by ``bending_rigidity``."""
     bending_rigidity: float = 4.0e-4
-    """Bending rigidity B [N·m] of the 'constrained' solver's dihedral hinges
-    (core/bending.py): E·t³/12 of office paper, E ≈ 5 GPa along the fibres, t ≈ 0.1 mm."""
+    """Bending rigidity B [N·m] of the 'constrained' solver's plate and hinges
+    (core/patches.py, core/bending.py): E·t³/12 of office paper, E ≈ 5 GPa along the
+    fibres, t ≈ 0.1 mm."""
     bend_damping: float = 2.0e-4
     """Axial damping of BEND springs [N·s/m]."""
     aux_stiffness: float = 3.0e4

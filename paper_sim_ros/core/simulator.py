@@ -27,7 +27,7 @@ import numpy as np
 
 from . import kernels
 from .config import SimulationConfig
-from .bending import HingeBending
+from .bending import SheetBending
 from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
@@ -97,7 +97,7 @@ class Simulator:
         if self.config.solver.method != 'constrained' or other._bending is None:
             return
         sheet = self.sheet
-        self._bending = HingeBending(sheet.positions, sheet.triangles,
+        self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
                                      self.config.sheet.bending_rigidity,
                                      sheet.spring_vertices[sheet.spring_kind == AUX],
                                      other._bending, keep_stiffness=True)
@@ -183,7 +183,7 @@ class Simulator:
         self._held_ends = sheet.spring_vertices[held_springs]
         self._held_rest = sheet.spring_rest_length[held_springs]
         self._global_weight = np.full(held_springs.size, self.config.solver.global_stiffness)
-        self._bending = HingeBending(sheet.positions, sheet.triangles,
+        self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
                                      self.config.sheet.bending_rigidity,
                                      sheet.spring_vertices[kind == AUX], self._bending)
         self._factor_global_steps()
@@ -257,6 +257,8 @@ class Simulator:
         if (damage.enabled and damage.yield_curvature > 0 and solver.method == 'constrained'
                 and self._bending is not None):
             self._bending.yield_to(self.sheet.positions, damage.yield_curvature)
+            if self._bending.matrix_changed:  # patches gave way to hinges
+                self._factor_global_steps()
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
                                self.sheet.positions - saved_positions):
             self.topology_changed()
@@ -386,15 +388,17 @@ class Simulator:
 
     def _projective_step(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray,
                          start_positions: np.ndarray) -> None:
-        """Implicit Euler split in two: the springs by local/global iterations
-        (core/projective.py), and after the first of them one solve of the bending system
-        (core/bending.py) from where the springs put the sheet; the remaining iterations
-        go on from where bending left it. Keeping the two apart matters: in one system the
-        springs' solver weight, which must be large for paper's stiffness, resists every
-        bending motion until the iterations turn the springs' targets, and a few
-        iterations never do; bending, being near-linear, needs one solve. Every spring aims
-        at its rest length and every hinge at its rest shape, so the sheet keeps its own
-        shape; the strain band is then enforced by _limit_strain."""
+        """Implicit Euler split in two: one solve of the bending system (core/bending.py)
+        from the inertial prediction, then the springs by local/global iterations
+        (core/projective.py) from where bending left the sheet. Keeping the two apart
+        matters: in one system the springs' solver weight, which must be large for paper's
+        stiffness, resists every bending motion until the iterations turn the springs'
+        targets, and a few iterations never do; bending, being near-linear, needs one
+        solve. Bending comes first so that it carries the sub-step's weight before the
+        springs see it (docs/solver.md: springs first left a drooping strip 30 % too stiff
+        at 2.5 mm cells). Every spring aims at its rest length and every hinge and patch at
+        its rest shape, so the sheet keeps its own shape; the strain band is then enforced
+        by _limit_strain."""
         sheet = self.sheet
         solver = self.config.solver
         positions = sheet.positions
@@ -415,21 +419,20 @@ class Simulator:
         rhs = np.empty_like(positions)
         iterations = solver.projective_iterations
         extra = solver.projective_max_iterations - iterations
-        # springs: one local/global iteration, and more while the sheet is squeezed
+        # a squeezed sheet: local/global iterations while it buckles, before bending
         if iterations:
-            self._spring_iteration(positions, weighted_inertia, rhs)
             self._buckling_iterations(positions, weighted_inertia, rhs, extra)
-        # bending, from where the springs put the sheet, with the table's reaction
+        # bending, from the prediction (or where buckling put the sheet), with the table's
+        # reaction
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         self._bending.add_targets(positions, weighted_inertia)
         self._bending_solve(weighted_inertia, positions, inertia_weight[:, 0])
         np.multiply(positions, inertia_weight, out=weighted_inertia)
-        if not iterations:
-            return
-        # springs: the remaining iterations, from where bending left the sheet
-        for _ in range(iterations - 1):
+        # springs: the iterations, from where bending left the sheet
+        for _ in range(iterations):
             self._spring_iteration(positions, weighted_inertia, rhs)
-        self._buckling_iterations(positions, weighted_inertia, rhs, extra)
+        if iterations:
+            self._buckling_iterations(positions, weighted_inertia, rhs, extra)
 
     def _buckling_iterations(self, positions, weighted_inertia, rhs, most: int) -> None:
         """Up to ``most`` more local/global iterations while the sheet is squeezed (more

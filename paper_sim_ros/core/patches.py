@@ -1,0 +1,350 @@
+"""Plate patches: the sheet's own bending as a discrete plate (issue 14).
+
+Hinges alone (core/bending.py) are not a plate on this grid. On its right triangles a
+hinge's curvature sits on one end of its edge, so half the vertices of a row carry no
+bending across that row: the discrete sheet finds grid-scale shapes that bend for less,
+and a clamped strip droops 23 % too far however fine the grid (the hinge energy does not
+converge here), while a twist costs twice what plate theory says. So where the sheet is
+the intact grid it is built as, it bends as a plate of Poisson's ratio 0 in finite
+differences over its material coordinates (u, v):
+
+    E = ½ B Σ_vertices A_v (|x_uu|² + |x_vv|²) + ½ B Σ_cells A_c 2 |x_uv|²
+
+x_uu and x_vv by three vertices in a line through each vertex, x_uv by the four corners of
+each cell: exact for quadratic shapes, the same for any direction of bending and either
+diagonal of a cell, zero for rigid motion, and no softer grid-scale shapes (a 13-point
+stencil, like the biharmonic's). Each term is a fixed linear combination of positions, so
+as with hinges the bending system's matrix is constant and a flat rest shape needs no local
+step (Bergou et al. 2006's argument); a curved rest shape (an aged sheet) is kept in the
+term's frame and turned with it (Bouaziz et al. 2014). A border vertex has the line along
+the border only.
+
+A term is a patch: its vertices, its one or two rows of coefficients, the tangents that
+give its frame, its weight B A. Damage is left to hinges: a patch whose mesh pieces damage
+changed (a break re-meshes them, a fold or crease ties two of its vertices) is dropped for
+good, and the triangles it covered are bent by their hinges again (creases at their
+reduced stiffness). Units SI.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .topology import edge_key
+
+FLAT_REST = 1e-6
+"""Patches whose rest second derivatives [1/m] are below this everywhere rest flat: their
+target is zero and skipped (the whole sheet, until it is aged or set)."""
+
+PATCH_WIDTH = 5
+"""Most vertices of a patch: a vertex and its four neighbours along the grid's axes."""
+
+AXIS_TOLERANCE = 1e-6
+"""An edge lies along a material axis when its offset across it is below this share of
+its length."""
+
+def _second_difference(before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Coefficients (before, centre, after) of the second derivative through three vertices
+    in a line, spacings ``before`` and ``after`` [m] (unequal allowed)."""
+    span = before + after
+    return 2.0 / (before * span), -2.0 / (before * after), 2.0 / (after * span)
+
+
+def grid_patches(material: np.ndarray, triangles: np.ndarray,
+                 quads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The plate's patches of a sheet's grid: one per vertex with a neighbour along each
+    material axis (its frame), with a row x_uu or x_vv where three vertices lie in a line
+    along that axis through it (a border has the one along it, a corner none), one per cell, two triangles sharing the cell's
+    diagonal with their four corners on a rectangle along the axes (row √2 x_uv).
+    ``quads``: the hinges (i, j, r, l). Returns (stencil (P, PATCH_WIDTH) int64 with -1
+    padding, rows (P, 3, PATCH_WIDTH) [1/m²], tangents (P, 2, PATCH_WIDTH) [1/m], and
+    whether each patch is a cell: its stencil is then a hinge (i, j, r, l), its triangles
+    (i, j, r) and (j, i, l))."""
+    vertex_count = material.shape[0]
+    first = np.concatenate([triangles[:, 0], triangles[:, 1], triangles[:, 2]])
+    second = np.concatenate([triangles[:, 1], triangles[:, 2], triangles[:, 0]])
+    # each vertex's neighbour and spacing in the four axis directions
+    neighbour = np.full((vertex_count, 4), -1, dtype=np.int64)  # -u, +u, -v, +v
+    spacing = np.ones((vertex_count, 4))
+    for start, end in ((first, second), (second, first)):
+        offset = material[end] - material[start]
+        length = np.hypot(offset[:, 0], offset[:, 1])
+        for axis in (0, 1):
+            along = np.abs(offset[:, 1 - axis]) <= AXIS_TOLERANCE * length
+            direction = 2 * axis + (offset[:, axis] > 0)
+            neighbour[start[along], direction[along]] = end[along]
+            spacing[start[along], direction[along]] = length[along]
+    has = neighbour >= 0
+    lines = has[:, 0::2] & has[:, 1::2]  # (V, 2): a line along u, along v
+    framed = has[:, 0::2] | has[:, 1::2]
+    # a corner has no line: its patch only frames it, and lets its triangles be the plate's
+    vertex = np.flatnonzero(framed.all(axis=1))
+    count = vertex.size
+    stencil = np.full((count, PATCH_WIDTH), -1, dtype=np.int64)
+    rows = np.zeros((count, 3, PATCH_WIDTH))
+    tangents = np.zeros((count, 2, PATCH_WIDTH))
+    stencil[:, 0] = vertex
+    # slots 1..4: -u, +u, -v, +v where they exist (a -1 slot only ever at the end)
+    for p, v in enumerate(vertex.tolist()):
+        slot = 1
+        for axis in (0, 1):
+            low, high = neighbour[v, 2 * axis], neighbour[v, 2 * axis + 1]
+            low_slot = high_slot = -1
+            if low >= 0:
+                stencil[p, slot], low_slot = low, slot
+                slot += 1
+            if high >= 0:
+                stencil[p, slot], high_slot = high, slot
+                slot += 1
+            before, after = spacing[v, 2 * axis], spacing[v, 2 * axis + 1]
+            if lines[v, axis]:
+                a, centre, b = _second_difference(before, after)
+                rows[p, axis, low_slot] += a
+                rows[p, axis, 0] += centre
+                rows[p, axis, high_slot] += b
+                tangents[p, axis, low_slot] -= 1.0 / (before + after)
+                tangents[p, axis, high_slot] += 1.0 / (before + after)
+            elif low >= 0:
+                tangents[p, axis, low_slot] -= 1.0 / before
+                tangents[p, axis, 0] += 1.0 / before
+            else:
+                tangents[p, axis, high_slot] += 1.0 / after
+                tangents[p, axis, 0] -= 1.0 / after
+    # cells: a hinge across a diagonal whose four corners lie on an axis rectangle
+    corners = quads.astype(np.int64)
+    centre = material[corners].mean(axis=1)
+    relative = material[corners] - centre[:, None, :]  # (H, 4, 2)
+    half = np.abs(relative)
+    rectangle = (np.all(np.abs(half - half[:, :1]) <= AXIS_TOLERANCE * half[:, :1].sum(
+        axis=2, keepdims=True), axis=(1, 2)) & np.all(half > 0, axis=(1, 2)))
+    diagonal = np.all(np.abs(material[corners[:, 1]] - material[corners[:, 0]])
+                      > AXIS_TOLERANCE * half[:, 0].sum(axis=1, keepdims=True), axis=1)
+    cells = np.flatnonzero(rectangle & diagonal)
+    sign = np.sign(relative[cells])  # (C, 4, 2)
+    width = 2.0 * half[cells, 0]  # (C, 2): the cell's sides along u and v
+    cell_rows = np.zeros((cells.size, 3, PATCH_WIDTH))
+    cell_rows[:, 0, :4] = np.sqrt(2.0) * sign[:, :, 0] * sign[:, :, 1] / (
+        width[:, 0] * width[:, 1])[:, None]
+    cell_tangents = np.zeros((cells.size, 2, PATCH_WIDTH))
+    cell_tangents[:, 0, :4] = sign[:, :, 0] / (2.0 * width[:, 0:1])
+    cell_tangents[:, 1, :4] = sign[:, :, 1] / (2.0 * width[:, 1:2])
+    cell_stencil = np.full((cells.size, PATCH_WIDTH), -1, dtype=np.int64)
+    cell_stencil[:, :4] = corners[cells]
+    return (np.concatenate([stencil, cell_stencil]), np.concatenate([rows, cell_rows]),
+            np.concatenate([tangents, cell_tangents]),
+            np.concatenate([np.zeros(count, dtype=bool), np.ones(cells.size, dtype=bool)]))
+
+
+def triangle_keys(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
+    """An order-independent integer key per triangle."""
+    ordered = np.sort(triangles.astype(np.int64), axis=1)
+    return (ordered[:, 0] * vertex_count + ordered[:, 1]) * vertex_count + ordered[:, 2]
+
+
+def cell_triangles(stencil: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two triangles (i, j, r) and (j, i, l) of cell patches' stencils."""
+    return stencil[:, [0, 1, 2]], stencil[:, [1, 0, 3]]
+
+
+def patches_standing(stencil: np.ndarray, is_cell: np.ndarray, triangles: np.ndarray,
+                     vertex_count: int) -> np.ndarray:
+    """Which patches still stand on the mesh of ``triangles``: a vertex patch's edges to
+    its neighbours are all edges of it, a cell's two triangles are both triangles of it."""
+    first = np.concatenate([triangles[:, 0], triangles[:, 1], triangles[:, 2]])
+    second = np.concatenate([triangles[:, 1], triangles[:, 2], triangles[:, 0]])
+    edges = np.unique(edge_key(first, second, vertex_count))
+    centre = np.repeat(stencil[:, :1], PATCH_WIDTH - 1, axis=1)
+    around = stencil[:, 1:]
+    edges_present = (np.isin(edge_key(centre, np.maximum(around, 0), vertex_count), edges)
+                     | (around < 0)).all(axis=1)
+    keys = triangle_keys(triangles, vertex_count)
+    one, other = cell_triangles(np.maximum(stencil, 0))
+    cells_present = (np.isin(triangle_keys(one, vertex_count), keys)
+                     & np.isin(triangle_keys(other, vertex_count), keys))
+    return np.where(is_cell, cells_present, edges_present)
+
+
+@njit(cache=True)
+def _patch_frame(positions, stencil, tangents, p, frame):
+    """The patch's frame into ``frame`` rows: unit x_a, x_b made orthogonal to it, their
+    normal."""
+    ta = np.zeros(3)
+    tb = np.zeros(3)
+    for slot in range(stencil.shape[1]):
+        w = stencil[p, slot]
+        if w < 0:
+            break
+        for axis in range(3):
+            ta[axis] += tangents[p, 0, slot] * positions[w, axis]
+            tb[axis] += tangents[p, 1, slot] * positions[w, axis]
+    size = max(np.sqrt(np.sum(ta * ta)), 1e-300)
+    ta /= size
+    tb -= np.sum(tb * ta) * ta
+    size = max(np.sqrt(np.sum(tb * tb)), 1e-300)
+    tb /= size
+    for axis in range(3):
+        frame[0, axis] = ta[axis]
+        frame[1, axis] = tb[axis]
+    frame[2, 0] = ta[1] * tb[2] - ta[2] * tb[1]
+    frame[2, 1] = ta[2] * tb[0] - ta[0] * tb[2]
+    frame[2, 2] = ta[0] * tb[1] - ta[1] * tb[0]
+
+
+@njit(cache=True)
+def _couple(stencil, rows, p, vertex_values, patch_values, to_patch):
+    """The patch's rows between its vertices and itself: ``patch_values`` (3, 3) +=
+    Σ c x over ``vertex_values`` (``to_patch``), or back, ``vertex_values`` += c t."""
+    for slot in range(stencil.shape[1]):
+        w = stencil[p, slot]
+        if w < 0:
+            break
+        for k in range(3):
+            for axis in range(3):
+                if to_patch:
+                    patch_values[k, axis] += rows[p, k, slot] * vertex_values[w, axis]
+                else:
+                    vertex_values[w, axis] += rows[p, k, slot] * patch_values[k, axis]
+
+
+@njit(cache=True)
+def _second_derivatives(positions, stencil, rows, p, out):
+    """The patch's rows applied to ``positions``: (3, 3) into ``out`` [1/m]."""
+    out[:] = 0.0
+    _couple(stencil, rows, p, positions, out, True)
+
+
+@njit(cache=True)
+def patch_rest_state(positions, stencil, rows, tangents, patches, rest):
+    """Each patch's second derivatives at ``positions`` in its frame, into ``rest``."""
+    frame = np.empty((3, 3))
+    second = np.empty((3, 3))
+    for p in patches:
+        _patch_frame(positions, stencil, tangents, p, frame)
+        _second_derivatives(positions, stencil, rows, p, second)
+        for k in range(3):
+            for row in range(3):
+                rest[p, k, row] = (frame[row, 0] * second[k, 0] + frame[row, 1] * second[k, 1]
+                                   + frame[row, 2] * second[k, 2])
+
+
+@njit(cache=True)
+def add_patch_targets(positions, stencil, rows, tangents, weight, rest, patches, rhs):
+    """The local step: each listed patch's rest second derivatives turned into its current
+    frame, w c R r added to ``rhs`` for its vertices."""
+    frame = np.empty((3, 3))
+    target = np.empty((3, 3))
+    for p in patches:
+        _patch_frame(positions, stencil, tangents, p, frame)
+        for k in range(3):
+            for axis in range(3):
+                target[k, axis] = weight[p] * (rest[p, k, 0] * frame[0, axis]
+                                               + rest[p, k, 1] * frame[1, axis]
+                                               + rest[p, k, 2] * frame[2, axis])
+        _couple(stencil, rows, p, rhs, target, False)
+
+
+@njit(cache=True)
+def patch_energy(positions, stencil, rows, tangents, weight, rest, patches):
+    """Σ ½ w |x'' − R r|² over the listed patches [J]."""
+    frame = np.empty((3, 3))
+    second = np.empty((3, 3))
+    total = 0.0
+    for p in patches:
+        _patch_frame(positions, stencil, tangents, p, frame)
+        _second_derivatives(positions, stencil, rows, p, second)
+        for k in range(3):
+            for axis in range(3):
+                turned = (rest[p, k, 0] * frame[0, axis] + rest[p, k, 1] * frame[1, axis]
+                          + rest[p, k, 2] * frame[2, axis])
+                total += 0.5 * weight[p] * (second[k, axis] - turned) ** 2
+    return total
+
+
+@njit(cache=True)
+def patches_beyond(positions, stencil, rows, tangents, rest, patches, yield_curvature):
+    """Which of the listed patches are bent beyond ``yield_curvature`` [1/m]: their
+    curvatures (their rows' components along their normal) depart from their rest ones by
+    more than it. The rows' components in the sheet's plane are the grid stretched or
+    sheared, not bent."""
+    frame = np.empty((3, 3))
+    second = np.empty((3, 3))
+    beyond = np.zeros(patches.size, dtype=np.bool_)
+    for index in range(patches.size):
+        p = patches[index]
+        _second_derivatives(positions, stencil, rows, p, second)
+        bound = np.sqrt(np.sum(second * second)) + np.sqrt(np.sum(rest[p] * rest[p]))
+        if bound <= yield_curvature:
+            continue
+        _patch_frame(positions, stencil, tangents, p, frame)
+        excess = 0.0
+        for k in range(3):
+            normal = (frame[2, 0] * second[k, 0] + frame[2, 1] * second[k, 1]
+                      + frame[2, 2] * second[k, 2])
+            excess += (normal - rest[p, k, 2]) ** 2
+        beyond[index] = np.sqrt(excess) > yield_curvature
+    return beyond
+
+
+@njit(cache=True)
+def patches_tying(stencil, pairs, vertex_count):
+    """Which patches hold both vertices of one of ``pairs`` (a fold's or a crease's AUX
+    spring): damage's, not a plate's any more."""
+    # per vertex, its partners
+    degree = np.zeros(vertex_count + 1, dtype=np.int64)
+    for k in range(pairs.shape[0]):
+        degree[pairs[k, 0] + 1] += 1
+        degree[pairs[k, 1] + 1] += 1
+    for v in range(vertex_count):
+        degree[v + 1] += degree[v]
+    partner = np.empty(degree[vertex_count], dtype=np.int64)
+    filled = degree[:vertex_count].copy()
+    for k in range(pairs.shape[0]):
+        a, b = pairs[k, 0], pairs[k, 1]
+        partner[filled[a]] = b
+        filled[a] += 1
+        partner[filled[b]] = a
+        filled[b] += 1
+    tied = np.zeros(stencil.shape[0], dtype=np.bool_)
+    width = stencil.shape[1]
+    for p in range(stencil.shape[0]):
+        for slot in range(width):
+            w = stencil[p, slot]
+            if w < 0 or tied[p]:
+                break
+            for k in range(degree[w], degree[w + 1]):
+                for other in range(width):
+                    if stencil[p, other] == partner[k]:
+                        tied[p] = True
+                        break
+    return tied
+
+
+def _cross(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """z of the cross product of rows of 2-vectors."""
+    return first[:, 0] * second[:, 1] - first[:, 1] * second[:, 0]
+
+
+def voronoi_areas(material: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(T, 3) each corner's share of its triangle's area [m²], the mixed Voronoi areas of
+    Meyer et al. 2003: the circumcentric share where the triangle is not obtuse, else half
+    the area to the obtuse corner and a quarter to the others."""
+    corners = material[triangles]  # (T, 3, 2)
+    shares = np.empty(triangles.shape)
+    area = 0.5 * np.abs(_cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    cotangents = np.empty(triangles.shape)
+    squared = np.empty(triangles.shape)  # of the edge opposite each corner
+    for k in range(3):
+        here, after, before = corners[:, k], corners[:, (k + 1) % 3], corners[:, (k + 2) % 3]
+        first, second = after - here, before - here
+        cotangents[:, k] = np.sum(first * second, axis=1) / np.maximum(
+            np.abs(_cross(first, second)), 1e-300)
+        squared[:, k] = np.sum((before - after) ** 2, axis=1)
+    for k in range(3):
+        after, before = (k + 1) % 3, (k + 2) % 3
+        # corner k: its two edges, each weighted by the cotangent of the angle opposite it
+        shares[:, k] = (squared[:, before] * cotangents[:, before]
+                        + squared[:, after] * cotangents[:, after]) / 8.0
+    obtuse = cotangents < 0.0
+    any_obtuse = obtuse.any(axis=1)
+    shares[any_obtuse] = np.where(obtuse[any_obtuse], 0.5, 0.25) * area[any_obtuse, None]
+    return shares
