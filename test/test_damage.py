@@ -252,7 +252,7 @@ def test_check_mesh_reports_broken_invariants():
 def test_squeeze_keeps_its_damage_and_rubber_springs_back(squeeze):
     """Issue 3's check, at the default grid (65²) and seed: the relaxed sheet keeps what
     it remembers (creases, plastic set: metrics.relax keeps the rest shape). Measured on
-    65², seed 0: 7.46 mm with damage, 0.00 mm without."""
+    65², seed 0: 6.24 mm with damage, 0.00 mm without."""
     damaged = squeeze(grid=65)
     rubber = squeeze(enabled=False, grid=65)
     assert damaged['relaxed_deviation_m'] >= 5e-3, damaged
@@ -281,7 +281,7 @@ def test_squeeze_keeps_a_set_with_one_and_with_four_substeps(squeeze):
     """The squeeze's lasting damage is mostly plastic set where the sheet bends sharply
     at the fingertips' fronts (DamageConfig.yield_curvature: 100–200 /m there), with a few
     breaks: at 65², seed 0, it keeps a set with 1 and with 4 sub-steps. Measured: relaxed
-    7.46 mm, 2 breaks, 57 folds with 1 sub-step; 1.65 mm, 1 break, no fold with 4, where
+    6.24 mm, 4 breaks, 50 folds with 1 sub-step; 1.25 mm, no break, 2 folds with 4, where
     the sheet arches smoothly instead of folding (with hinges for bending, before issue
     14: 5.97 and 3.71 mm). How much depends on the sub-step count: README, known
     limitations."""

@@ -288,28 +288,32 @@ class SheetBending:
         # longer bends back
         self.stiffness[self.folded] = 0.0
         self.matrix_changed = False
+        self._waited = 0
         self._triangles = triangles
         self._material = np.asarray(material, dtype=np.float64)
         self._rigidity = rigidity
         self._build_patches(positions, fold_pairs, previous)
         self._cover()
 
-    _PATCH_ARRAYS = ('stencil', 'rows', 'tangents', 'is_cell', 'patch_rest')
+    _PATCH_ARRAYS = ('stencil', 'rows', 'tangents', 'is_cell', 'patch_rest', 'yielding')
 
     def _build_patches(self, positions, fold_pairs, previous) -> None:
         vertex_count = positions.shape[0]
         if previous is None:
             self.stencil, self.rows, self.tangents, self.is_cell = patches.grid_patches(
                 self._material, self._triangles, self.quads)
-            self.patch_rest = np.zeros((self.stencil.shape[0], 3, 3))
+            self.patch_rest = np.zeros((self.stencil.shape[0], patches.ROWS, 3))
             patches.patch_rest_state(positions, self.stencil, self.rows, self.tangents,
                                      np.arange(self.stencil.shape[0]), self.patch_rest)
+            self.yielding = np.zeros(self.stencil.shape[0], dtype=bool)
         else:
-            # a patch lives on only on the mesh pieces it was made on
+            # a patch lives on only on the mesh pieces it was made on, and not once it
+            # yielded
             for name in self._PATCH_ARRAYS:
                 setattr(self, name, getattr(previous, name))
             self._keep_patches(patches.patches_standing(self.stencil, self.is_cell,
-                                                        self._triangles, vertex_count))
+                                                        self._triangles, vertex_count)
+                               & ~self.yielding)
         if fold_pairs.shape[0]:  # a fold or a crease in a patch: damage's, not a plate's
             self._keep_patches(~patches.patches_tying(self.stencil, fold_pairs.astype(np.int64),
                                                       vertex_count))
@@ -337,17 +341,23 @@ class SheetBending:
         corner_area = patches.voronoi_areas(self._material, triangles[covered])
         vertex_area = np.bincount(triangles[covered].ravel(), weights=corner_area.ravel(),
                                   minlength=vertex_count)
-        triangle_area = dict(zip(keys[covered].tolist(), corner_area.sum(axis=1)))
         area = np.zeros(self.stencil.shape[0])
         area[~self.is_cell] = vertex_area[centres]
-        area[self.is_cell] = [
-            triangle_area.get(a, 0.0) + triangle_area.get(b, 0.0)
-            for a, b in zip(patches.triangle_keys(one, vertex_count).tolist(),
-                            patches.triangle_keys(other, vertex_count).tolist())]
+        # a cell's area: its two triangles' where they are covered
+        covered_keys_order = np.argsort(keys[covered])
+        sorted_keys = keys[covered][covered_keys_order]
+        sorted_area = corner_area.sum(axis=1)[covered_keys_order]
+        cell_area = np.zeros(one.shape[0])
+        for half in (one, other):
+            key = patches.triangle_keys(half, vertex_count)
+            at = np.minimum(np.searchsorted(sorted_keys, key), max(sorted_keys.size - 1, 0))
+            if sorted_keys.size:
+                cell_area += np.where(sorted_keys[at] == key, sorted_area[at], 0.0)
+        area[self.is_cell] = cell_area
         self.patch_weight = self._rigidity * area
         self._patches = np.flatnonzero(self.patch_weight > 0.0)
-        curvature = np.abs(self.patch_rest[self._patches]).reshape(-1, 9).max(axis=1,
-                                                                             initial=0.0)
+        curvature = np.abs(self.patch_rest[self._patches]).reshape(
+            self._patches.size, patches.ROWS * 3).max(axis=1, initial=0.0)
         self._curved_patches = self._patches[curvature > patches.FLAT_REST]
         uncovered = (~np.isin(patches.triangle_keys(self.quads[:, [0, 1, 2]], vertex_count),
                               covered_keys)).astype(int) \
@@ -386,7 +396,7 @@ class SheetBending:
                   * self.weights[:, None, :]).ravel()
         stencil = self.stencil[self._patches]
         vertex = np.where(stencil >= 0, stencil, stencil[:, :1])  # padding: 0 coefficients
-        coefficients = self.rows[self._patches]  # (P, 3, K)
+        coefficients = self.rows[self._patches]  # (P, ROWS, K)
         patch_values = np.einsum('p,pka,pkb->pab', self.patch_weight[self._patches],
                                  coefficients, coefficients)
         width = vertex.shape[1]
@@ -402,20 +412,26 @@ class SheetBending:
                                   self.patch_weight, self.patch_rest, self._curved_patches,
                                   rhs)
 
-    def yield_to(self, positions: np.ndarray, yield_curvature: float) -> int:
+    def yield_to(self, positions: np.ndarray, yield_curvature: float, batch: int = 1) -> int:
         """Plasticity: the hinges bent beyond ``yield_curvature`` [1/m] keep the excess as
         their rest shape, and a patch bent beyond it is damage: dropped for good, its
-        triangles bent by their hinges from then on (which yield in turn). Returns how many
-        hinges and patches yielded; ``matrix_changed`` tells whether patches were dropped
-        (the bending system must then be factorised again)."""
+        triangles bent by their hinges from then on (which yield in turn). Dropping patches
+        changes the bending system, so they are dropped together once ``batch`` calls have
+        passed since the first of them yielded. Returns how many hinges and patches
+        yielded; ``matrix_changed`` tells whether patches were dropped (the bending system
+        must then be factorised again)."""
+        bound = patches.departure_bounds(positions, self.stencil, self.rows, self.patch_rest,
+                                         self._patches)
+        candidates = self._patches[bound > yield_curvature]
         beyond = patches.patches_beyond(positions, self.stencil, self.rows, self.tangents,
-                                        self.patch_rest, self._patches, yield_curvature)
-        self.matrix_changed = bool(beyond.any())
+                                        self.patch_rest, candidates, yield_curvature)
+        self.yielding[candidates[beyond]] = True
+        self._waited = self._waited + 1 if self.yielding.any() else 0
+        self.matrix_changed = self._waited >= batch
         if self.matrix_changed:
-            kept = np.ones(self.stencil.shape[0], dtype=bool)
-            kept[self._patches[beyond]] = False
-            self._keep_patches(kept)
+            self._keep_patches(~self.yielding)
             self._cover()
+            self._waited = 0
         yielded = int(yield_hinges(positions, self.quads, self.weights,
                                    self._hinge_stiffness, self.rest_curvature,
                                    yield_curvature))

@@ -36,6 +36,9 @@ FLAT_REST = 1e-6
 """Patches whose rest second derivatives [1/m] are below this everywhere rest flat: their
 target is zero and skipped (the whole sheet, until it is aged or set)."""
 
+ROWS = 2
+"""Rows of a patch: x_uu and x_vv of a vertex, √2 x_uv (and nothing) of a cell."""
+
 PATCH_WIDTH = 5
 """Most vertices of a patch: a vertex and its four neighbours along the grid's axes."""
 
@@ -57,7 +60,7 @@ def grid_patches(material: np.ndarray, triangles: np.ndarray,
     along that axis through it (a border has the one along it, a corner none), one per cell, two triangles sharing the cell's
     diagonal with their four corners on a rectangle along the axes (row √2 x_uv).
     ``quads``: the hinges (i, j, r, l). Returns (stencil (P, PATCH_WIDTH) int64 with -1
-    padding, rows (P, 3, PATCH_WIDTH) [1/m²], tangents (P, 2, PATCH_WIDTH) [1/m], and
+    padding, rows (P, ROWS, PATCH_WIDTH) [1/m²], tangents (P, 2, PATCH_WIDTH) [1/m], and
     whether each patch is a cell: its stencil is then a hinge (i, j, r, l), its triangles
     (i, j, r) and (j, i, l))."""
     vertex_count = material.shape[0]
@@ -81,7 +84,7 @@ def grid_patches(material: np.ndarray, triangles: np.ndarray,
     vertex = np.flatnonzero(framed.all(axis=1))
     count = vertex.size
     stencil = np.full((count, PATCH_WIDTH), -1, dtype=np.int64)
-    rows = np.zeros((count, 3, PATCH_WIDTH))
+    rows = np.zeros((count, ROWS, PATCH_WIDTH))
     tangents = np.zeros((count, 2, PATCH_WIDTH))
     stencil[:, 0] = vertex
     # slots 1..4: -u, +u, -v, +v where they exist (a -1 slot only ever at the end)
@@ -122,7 +125,7 @@ def grid_patches(material: np.ndarray, triangles: np.ndarray,
     cells = np.flatnonzero(rectangle & diagonal)
     sign = np.sign(relative[cells])  # (C, 4, 2)
     width = 2.0 * half[cells, 0]  # (C, 2): the cell's sides along u and v
-    cell_rows = np.zeros((cells.size, 3, PATCH_WIDTH))
+    cell_rows = np.zeros((cells.size, ROWS, PATCH_WIDTH))
     cell_rows[:, 0, :4] = np.sqrt(2.0) * sign[:, :, 0] * sign[:, :, 1] / (
         width[:, 0] * width[:, 1])[:, None]
     cell_tangents = np.zeros((cells.size, 2, PATCH_WIDTH))
@@ -192,13 +195,13 @@ def _patch_frame(positions, stencil, tangents, p, frame):
 
 @njit(cache=True)
 def _couple(stencil, rows, p, vertex_values, patch_values, to_patch):
-    """The patch's rows between its vertices and itself: ``patch_values`` (3, 3) +=
+    """The patch's rows between its vertices and itself: ``patch_values`` (ROWS, 3) +=
     Σ c x over ``vertex_values`` (``to_patch``), or back, ``vertex_values`` += c t."""
     for slot in range(stencil.shape[1]):
         w = stencil[p, slot]
         if w < 0:
             break
-        for k in range(3):
+        for k in range(ROWS):
             for axis in range(3):
                 if to_patch:
                     patch_values[k, axis] += rows[p, k, slot] * vertex_values[w, axis]
@@ -208,7 +211,7 @@ def _couple(stencil, rows, p, vertex_values, patch_values, to_patch):
 
 @njit(cache=True)
 def _second_derivatives(positions, stencil, rows, p, out):
-    """The patch's rows applied to ``positions``: (3, 3) into ``out`` [1/m]."""
+    """The patch's rows applied to ``positions``: (ROWS, 3) into ``out`` [1/m]."""
     out[:] = 0.0
     _couple(stencil, rows, p, positions, out, True)
 
@@ -217,11 +220,11 @@ def _second_derivatives(positions, stencil, rows, p, out):
 def patch_rest_state(positions, stencil, rows, tangents, patches, rest):
     """Each patch's second derivatives at ``positions`` in its frame, into ``rest``."""
     frame = np.empty((3, 3))
-    second = np.empty((3, 3))
+    second = np.empty((ROWS, 3))
     for p in patches:
         _patch_frame(positions, stencil, tangents, p, frame)
         _second_derivatives(positions, stencil, rows, p, second)
-        for k in range(3):
+        for k in range(ROWS):
             for row in range(3):
                 rest[p, k, row] = (frame[row, 0] * second[k, 0] + frame[row, 1] * second[k, 1]
                                    + frame[row, 2] * second[k, 2])
@@ -232,10 +235,10 @@ def add_patch_targets(positions, stencil, rows, tangents, weight, rest, patches,
     """The local step: each listed patch's rest second derivatives turned into its current
     frame, w c R r added to ``rhs`` for its vertices."""
     frame = np.empty((3, 3))
-    target = np.empty((3, 3))
+    target = np.empty((ROWS, 3))
     for p in patches:
         _patch_frame(positions, stencil, tangents, p, frame)
-        for k in range(3):
+        for k in range(ROWS):
             for axis in range(3):
                 target[k, axis] = weight[p] * (rest[p, k, 0] * frame[0, axis]
                                                + rest[p, k, 1] * frame[1, axis]
@@ -247,17 +250,46 @@ def add_patch_targets(positions, stencil, rows, tangents, weight, rest, patches,
 def patch_energy(positions, stencil, rows, tangents, weight, rest, patches):
     """Σ ½ w |x'' − R r|² over the listed patches [J]."""
     frame = np.empty((3, 3))
-    second = np.empty((3, 3))
+    second = np.empty((ROWS, 3))
     total = 0.0
     for p in patches:
         _patch_frame(positions, stencil, tangents, p, frame)
         _second_derivatives(positions, stencil, rows, p, second)
-        for k in range(3):
+        for k in range(ROWS):
             for axis in range(3):
                 turned = (rest[p, k, 0] * frame[0, axis] + rest[p, k, 1] * frame[1, axis]
                           + rest[p, k, 2] * frame[2, axis])
                 total += 0.5 * weight[p] * (second[k, axis] - turned) ** 2
     return total
+
+
+@njit(cache=True)
+def departure_bounds(positions, stencil, rows, rest, patches):
+    """|x''| + |r| of each listed patch [1/m]: a bound on how far its curvature departs from
+    its rest, which passes most patches over before their frames are made."""
+    bounds = np.empty(patches.size)
+    for index in range(patches.size):
+        p = patches[index]
+        total = 0.0
+        for k in range(ROWS):
+            sx = 0.0
+            sy = 0.0
+            sz = 0.0
+            for slot in range(stencil.shape[1]):
+                w = stencil[p, slot]
+                if w < 0:
+                    break
+                c = rows[p, k, slot]
+                sx += c * positions[w, 0]
+                sy += c * positions[w, 1]
+                sz += c * positions[w, 2]
+            total += sx * sx + sy * sy + sz * sz
+        resting = 0.0
+        for k in range(ROWS):
+            for row in range(3):
+                resting += rest[p, k, row] * rest[p, k, row]
+        bounds[index] = np.sqrt(total) + np.sqrt(resting)
+    return bounds
 
 
 @njit(cache=True)
@@ -267,17 +299,14 @@ def patches_beyond(positions, stencil, rows, tangents, rest, patches, yield_curv
     more than it. The rows' components in the sheet's plane are the grid stretched or
     sheared, not bent."""
     frame = np.empty((3, 3))
-    second = np.empty((3, 3))
+    second = np.empty((ROWS, 3))
     beyond = np.zeros(patches.size, dtype=np.bool_)
     for index in range(patches.size):
         p = patches[index]
         _second_derivatives(positions, stencil, rows, p, second)
-        bound = np.sqrt(np.sum(second * second)) + np.sqrt(np.sum(rest[p] * rest[p]))
-        if bound <= yield_curvature:
-            continue
         _patch_frame(positions, stencil, tangents, p, frame)
         excess = 0.0
-        for k in range(3):
+        for k in range(ROWS):
             normal = (frame[2, 0] * second[k, 0] + frame[2, 1] * second[k, 1]
                       + frame[2, 2] * second[k, 2])
             excess += (normal - rest[p, k, 2]) ** 2

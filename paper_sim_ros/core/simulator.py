@@ -57,6 +57,11 @@ component, all of it."""
 CONTACT_ROW_PASSES = 3
 """Solves per local/global iteration, at most, while its contact rows settle (rows that
 pull let go, vertices carried into a probe given one: Simulator._settle_contact_rows)."""
+YIELD_BATCH_FRAMES = 6
+"""Patches that yield are dropped together once this many frames have passed since the
+first of them (SheetBending.yield_to): each drop factorises the bending system again
+(dropped at once: `crumple` at 65² ran at 1.15× real time; docs/solver.md)."""
+
 CONTACT_TOLERANCE = 1e-5
 """Depth inside a probe [m] at which a vertex without a contact row gets one."""
 
@@ -188,22 +193,25 @@ class Simulator:
                                      sheet.spring_vertices[kind == AUX], self._bending)
         self._factor_global_steps()
 
-    def _factor_global_steps(self) -> None:
-        """Factor the springs' and the bending's systems, the pinned vertices held (what
-        the probes hold changes every sub-step: ConstrainedSolve holds it)."""
+    def _factor_global_steps(self, springs: bool = True) -> None:
+        """Factor the bending's system and (``springs``) the springs', the pinned vertices
+        held (what the probes hold changes every sub-step: ConstrainedSolve holds it)."""
         sheet = self.sheet
         h = self.config.solver.dt / self.config.solver.substeps
         pinned = sheet.pinned
         self._table_reaction[pinned] = 0.0  # held vertices are not the solve's to support
+        self._bending.matrix_changed = False
+        if not np.any(~pinned):
+            self._global_step = self._bending_step = None
+            return
         # a small change (a break, a fold) reuses the last factors (projective.UpdatedStep)
         previous_bending = self._bending_step.step if self._bending_step else None
-        previous_springs = self._global_step.step if self._global_step else None
-        self._global_step = self._bending_step = None
-        if np.any(~pinned):
-            self._bending_step = ConstrainedSolve(
-                global_step(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h,
-                            previous_bending),
-                sheet.vertex_count)
+        self._bending_step = ConstrainedSolve(
+            global_step(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h,
+                        previous_bending),
+            sheet.vertex_count)
+        if springs or self._global_step is None:
+            previous_springs = self._global_step.step if self._global_step else None
             self._global_step = ConstrainedSolve(
                 global_step(sheet.vertex_mass, pinned,
                             spring_entries(self._held_ends, self._global_weight), h,
@@ -256,15 +264,17 @@ class Simulator:
         damage = self.config.damage
         if (damage.enabled and damage.yield_curvature > 0 and solver.method == 'constrained'
                 and self._bending is not None):
-            self._bending.yield_to(self.sheet.positions, damage.yield_curvature)
-            if self._bending.matrix_changed:  # patches gave way to hinges
-                self._factor_global_steps()
+            self._bending.yield_to(self.sheet.positions, damage.yield_curvature,
+                                   YIELD_BATCH_FRAMES)
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
                                self.sheet.positions - saved_positions):
             self.topology_changed()
-        elif any(step is not None and step.step.stale
-                 for step in (self._global_step, self._bending_step)):
+        elif self._global_step is not None and self._global_step.step.stale:
             self._factor_global_steps()  # the updates since the last factor cost more
+        elif self._bending_step is not None and (self._bending_step.step.stale
+                                                 or self._bending.matrix_changed):
+            # patches gave way to hinges: the springs are as they were
+            self._factor_global_steps(springs=False)
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
         self.frame += 1
