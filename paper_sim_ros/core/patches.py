@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .topology import edge_key
+from .topology import edge_key, mesh_edges
 
 FLAT_REST = 1e-6
 """Patches whose rest second derivatives [1/m] are below this everywhere rest flat: their
@@ -57,15 +57,16 @@ def grid_patches(material: np.ndarray, triangles: np.ndarray,
                  quads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The plate's patches of a sheet's grid: one per vertex with a neighbour along each
     material axis (its frame), with a row x_uu or x_vv where three vertices lie in a line
-    along that axis through it (a border has the one along it, a corner none), one per cell, two triangles sharing the cell's
-    diagonal with their four corners on a rectangle along the axes (row √2 x_uv).
+    along that axis through it (a border has the one along it, a corner none); one per
+    cell, two triangles sharing the cell's diagonal with their four corners on a rectangle
+    along the axes (row √2 x_uv).
     ``quads``: the hinges (i, j, r, l). Returns (stencil (P, PATCH_WIDTH) int64 with -1
     padding, rows (P, ROWS, PATCH_WIDTH) [1/m²], tangents (P, 2, PATCH_WIDTH) [1/m], and
     whether each patch is a cell: its stencil is then a hinge (i, j, r, l), its triangles
     (i, j, r) and (j, i, l))."""
     vertex_count = material.shape[0]
-    first = np.concatenate([triangles[:, 0], triangles[:, 1], triangles[:, 2]])
-    second = np.concatenate([triangles[:, 1], triangles[:, 2], triangles[:, 0]])
+    edges, _ = mesh_edges(triangles, vertex_count)
+    first, second = edges[:, 0], edges[:, 1]
     # each vertex's neighbour and spacing in the four axis directions
     neighbour = np.full((vertex_count, 4), -1, dtype=np.int64)  # -u, +u, -v, +v
     spacing = np.ones((vertex_count, 4))
@@ -153,9 +154,8 @@ def patches_standing(stencil: np.ndarray, is_cell: np.ndarray, triangles: np.nda
                      vertex_count: int) -> np.ndarray:
     """Which patches still stand on the mesh of ``triangles``: a vertex patch's edges to
     its neighbours are all edges of it, a cell's two triangles are both triangles of it."""
-    first = np.concatenate([triangles[:, 0], triangles[:, 1], triangles[:, 2]])
-    second = np.concatenate([triangles[:, 1], triangles[:, 2], triangles[:, 0]])
-    edges = np.unique(edge_key(first, second, vertex_count))
+    edges, _ = mesh_edges(triangles, vertex_count)
+    edges = edge_key(edges[:, 0], edges[:, 1], vertex_count)  # sorted, unique
     centre = np.repeat(stencil[:, :1], PATCH_WIDTH - 1, axis=1)
     around = stencil[:, 1:]
     edges_present = (np.isin(edge_key(centre, np.maximum(around, 0), vertex_count), edges)
