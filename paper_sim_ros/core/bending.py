@@ -343,10 +343,17 @@ class SheetBending:
                                   minlength=vertex_count)
         area = np.zeros(self.stencil.shape[0])
         area[~self.is_cell] = vertex_area[centres]
-        # a cell's area: its two triangles', each where its corners have vertex patches
-        area[self.is_cell] = sum(
-            patches.voronoi_areas(self._material, half).sum(axis=1)
-            * np.all(has_vertex_patch[half], axis=1) for half in (one, other))
+        # a cell's area: its two triangles' where they are covered
+        covered_keys_order = np.argsort(keys[covered])
+        sorted_keys = keys[covered][covered_keys_order]
+        sorted_area = corner_area.sum(axis=1)[covered_keys_order]
+        cell_area = np.zeros(one.shape[0])
+        for half in (one, other):
+            key = patches.triangle_keys(half, vertex_count)
+            at = np.minimum(np.searchsorted(sorted_keys, key), max(sorted_keys.size - 1, 0))
+            if sorted_keys.size:
+                cell_area += np.where(sorted_keys[at] == key, sorted_area[at], 0.0)
+        area[self.is_cell] = cell_area
         self.patch_weight = self._rigidity * area
         self._patches = np.flatnonzero(self.patch_weight > 0.0)
         curvature = np.abs(self.patch_rest[self._patches]).reshape(
