@@ -430,6 +430,11 @@ def unit_responses(solve: Callable[[np.ndarray, np.ndarray], None], vertices: np
     return columns
 
 
+KEPT_COLUMN_ENTRIES = 8_000_000
+"""Entries of the columns A⁻¹ e_v a ConstrainedSolve keeps, at most (64 MB: 1 893 columns at
+65², 480 at 129²); beyond, it keeps those of the rows of the solve at hand only."""
+
+
 class ConstrainedSolve:
     """A global step's solution with some vertices constrained, without a new factor: each
     constraint row r asks dᵣ · x[vᵣ] = cᵣ (a held vertex is three rows, e_x, e_y, e_z; a
@@ -458,6 +463,12 @@ class ConstrainedSolve:
         if missing.size == 0:
             return
         vertex_count = self._column_of.size
+        if (self._column_count + missing.size) * vertex_count > KEPT_COLUMN_ENTRIES:
+            # a sheet that has touched much in its time: start again from what is held now
+            self._column_of[:] = -1
+            self._column_count = 0
+            self._factored_rows = ()
+            missing = np.unique(vertices)
         needed = self._column_count + missing.size
         if needed > self._columns.shape[0]:
             grown = np.zeros((max(needed, 2 * self._columns.shape[0], 16), vertex_count))

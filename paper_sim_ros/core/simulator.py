@@ -44,6 +44,10 @@ TABLE_ITERATIONS = 10
 sheet at rest on the table quivering (docs/solver.md)."""
 TABLE_TOLERANCE = 1e-6
 """Contact violation [m] at which the table's reaction counts as settled."""
+TABLE_ROWS_MOST = 256
+"""Vertices on the table held exactly in the bending solve, at most (Simulator._table_rows:
+each costs a third of a solve once, and the rows' dense system grows with their square)."""
+UP = np.array([0.0, 0.0, 1.0])
 BUCKLING_PROGRESS = 0.05
 """The share of the springs' compression beyond ``buckling_compression`` an extra
 local/global iteration must take out for the next one to run (docs/solver.md)."""
@@ -466,13 +470,56 @@ class Simulator:
         the table afterwards would move only the vertices below it: a bent sheet resting
         on its low points would be flattened into the table one sub-step after another,
         since nothing carries the table's push to the rest of it. Here the reaction λ ≥ 0
-        is part of the solve (projected Uzawa iterations with Nesterov's extrapolation,
-        warm-started from the last sub-step), so the push reaches the whole sheet through
-        its bending stiffness."""
-        contact = self.config.contact
-        if not contact.ground_enabled:
+        is part of the solve, so the push reaches the whole sheet through its bending
+        stiffness: exactly, by holding the vertices on the table (``_table_rows``), where
+        they are few; by Uzawa iterations (``_table_uzawa``) where the sheet lies flat on
+        the table."""
+        if not self.config.contact.ground_enabled:
             self._bending_step.solve(rhs, positions, *self._rows)
-            return
+        elif not self._table_rows(rhs, positions):
+            self._table_uzawa(rhs, positions, mass_over_h2)
+
+    def _table_rows(self, rhs, positions) -> bool:
+        """The table's contacts as constraint rows of the bending solve (z = table height),
+        found by an active set: the vertices the table pushed in the last sub-step, less
+        those it would now pull down, plus those the solve puts below it, until the set
+        holds (a primal-dual active set method; it ends in one or two solves where the
+        contacts change little). What it finds is the reaction for the friction of the next
+        sub-step. Uzawa's projected gradient steps, by contrast, crawl here: a point
+        contact on a sheet that bending stiffens takes hundreds of its steps (the demo's
+        sheet, its far edge on the table, ran out of TABLE_ITERATIONS in every sub-step:
+        docs/solver.md). Returns False, the reaction as it was (the Uzawa iterations' warm
+        start), when more than TABLE_ROWS_MOST vertices are on the table."""
+        ground = self.config.contact.ground_height
+        vertex, direction, value = self._rows
+        eligible = ~self.sheet.pinned
+        eligible[vertex] = False  # a probe's row decides its vertex
+        held = np.flatnonzero(eligible & (self._table_reaction > 0.0))
+        warm_start = self._table_reaction.copy()
+        for _ in range(TABLE_ITERATIONS):
+            if held.size > TABLE_ROWS_MOST:
+                self._table_reaction[:] = warm_start
+                return False
+            multipliers = self._bending_step.solve(
+                rhs, positions, np.concatenate([vertex, held]),
+                np.concatenate([direction, np.tile(UP, (held.size, 1))]),
+                np.concatenate([value, np.full(held.size, ground)]))
+            push = -multipliers[vertex.size:]  # a row pushes along its direction where λ < 0
+            self._table_reaction[:] = 0.0
+            self._table_reaction[held] = np.maximum(push, 0.0)
+            below = eligible & (positions[:, 2] < ground - TABLE_TOLERANCE)
+            below[held] = False
+            pulling = push < 0.0
+            if not (np.any(pulling) or np.any(below)):
+                break
+            held = np.concatenate([held[~pulling], np.flatnonzero(below)])
+        return True
+
+    def _table_uzawa(self, rhs, positions, mass_over_h2) -> None:
+        """The table's reaction by projected Uzawa iterations with Nesterov's extrapolation,
+        warm-started from the last sub-step: where the sheet lies flat on the table they
+        settle at once."""
+        contact = self.config.contact
         free = self._bending_step.step.free
         inertia_z = rhs[:, 2].copy()
         reaction = self._table_reaction
