@@ -252,7 +252,7 @@ def test_check_mesh_reports_broken_invariants():
 def test_squeeze_keeps_its_damage_and_rubber_springs_back(squeeze):
     """Issue 3's check, at the default grid (65²) and seed: the relaxed sheet keeps what
     it remembers (creases, plastic set: metrics.relax keeps the rest shape). Measured on
-    65², seed 0: 3.20 mm with damage (seeds 0–4: 2.9–5.8 mm), 0.00 mm without. Issue 3
+    65², seed 0: 3.59 mm with damage (seeds 0–4: 3.6–5.8 mm), 0.00 mm without. Issue 3
     asked for 5 mm; seed 0 gave 6.24 mm until the table's contacts were held exactly in
     the bending solve (seeds 0–4 then: 3.2–7.3 mm): the set a
     squeeze leaves depends on the seed that much (docs/contact.md)."""
@@ -284,8 +284,8 @@ def test_squeeze_keeps_a_set_with_one_and_with_four_substeps(squeeze):
     """The squeeze's lasting damage is mostly plastic set where the sheet bends sharply
     at the fingertips' fronts (DamageConfig.yield_curvature: 100–200 /m there), with a few
     breaks: at 65², seed 0, it keeps a set with 1 and with 4 sub-steps. Measured with
-    the table's contacts held exactly in the bending solve: relaxed 3.20 mm, 2 breaks,
-    45 folds with 1 sub-step; 1.53 mm, no break, 3 folds with 4, where the sheet arches
+    the table's contacts held exactly in the bending solve: relaxed 3.59 mm, 2 breaks,
+    42 folds with 1 sub-step; 1.30 mm, no break, 7 folds with 4, where the sheet arches
     smoothly instead of folding (before that: 6.24 and 1.25 mm;
     with hinges for bending, before issue 14: 5.97 and 3.71 mm). How much depends on the
     sub-step count and the seed: README, known limitations."""

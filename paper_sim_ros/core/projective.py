@@ -458,6 +458,11 @@ class ConstrainedSolve:
         rows come back for every iteration of a sub-step."""
         self._lower = np.zeros((0, 0))
 
+    def missing_columns(self, vertices: np.ndarray) -> int:
+        """How many of ``vertices`` (distinct) have no column yet: rows on them cost a
+        third of a solve each the first time."""
+        return int(np.count_nonzero(self._column_of[vertices] < 0))
+
     def _ensure_columns(self, vertices: np.ndarray) -> None:
         missing = np.unique(vertices[self._column_of[vertices] < 0])
         if missing.size == 0:

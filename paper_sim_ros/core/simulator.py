@@ -210,6 +210,7 @@ class Simulator:
             return
         # a small change (a break, a fold) reuses the last factors (projective.UpdatedStep)
         previous_bending = self._bending_step.step if self._bending_step else None
+        self._bending_factored_at = self.frame
         self._bending_step = ConstrainedSolve(
             global_step(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h,
                         previous_bending),
@@ -495,6 +496,13 @@ class Simulator:
         eligible = ~self.sheet.pinned
         eligible[vertex] = False  # a probe's row decides its vertex
         held = np.flatnonzero(eligible & (self._table_reaction > 0.0))
+        # the rows' columns are bought once per factor: worth it where the factor stands
+        # long enough to spread their cost below the Uzawa iterations' (a factor that has
+        # stood some frames is taken to stand about as long again; in a squeeze's yielding
+        # it is renewed every other frame, in the demo's drape it stands for seconds)
+        standing = max(self.frame - self._bending_factored_at, 1)
+        if self._bending_step.missing_columns(held) > 3 * (TABLE_ITERATIONS - 1) * standing:
+            return False
         warm_start = self._table_reaction.copy()
         for _ in range(TABLE_ITERATIONS):
             if held.size > TABLE_ROWS_MOST:
