@@ -254,8 +254,8 @@ def test_squeeze_keeps_its_damage_and_rubber_springs_back(squeeze):
     it remembers (creases, plastic set: metrics.relax keeps the rest shape). Measured on
     65², seed 0: 3.59 mm with damage (seeds 0–4: 3.6–5.8 mm), 0.00 mm without. Issue 3
     asked for 5 mm; seed 0 gave 6.24 mm until the table's contacts were held exactly in
-    the bending solve (seeds 0–4 then: 3.2–7.3 mm): the set a
-    squeeze leaves depends on the seed that much (docs/contact.md)."""
+    the bending solve (seeds 0–4 then: 3.2–7.3 mm): the set a squeeze leaves depends on
+    the seed that much (docs/contact.md)."""
     damaged = squeeze(grid=65)
     rubber = squeeze(enabled=False, grid=65)
     assert damaged['relaxed_deviation_m'] >= 2.5e-3, damaged
