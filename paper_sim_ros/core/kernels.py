@@ -179,11 +179,15 @@ def project_springs(positions, inverse_mass, spring_vertices, rest_length, short
         dx = positions[j, 0] - positions[i, 0]
         dy = positions[j, 1] - positions[i, 1]
         dz = positions[j, 2] - positions[i, 2]
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        if length < EPSILON_LENGTH:
-            continue
+        squared = dx * dx + dy * dy + dz * dz
         upper = longest * rest_length[s]
         lower = shortest * rest_length[s]
+        # most springs are within the band: no square root for them
+        if lower * lower < squared < upper * upper:
+            continue
+        length = np.sqrt(squared)
+        if length < EPSILON_LENGTH:
+            continue
         if length > upper:
             target = upper
         elif length < lower:
