@@ -47,7 +47,8 @@ TABLE_TOLERANCE = 1e-6
 TABLE_ROWS_MOST = 256
 """Vertices on the table held exactly in the bending solve, at most (Simulator._table_rows:
 each costs a third of a solve once, and the rows' dense system grows with their square)."""
-UP = np.array([0.0, 0.0, 1.0])
+TABLE_NORMAL = np.array([0.0, 0.0, 1.0])
+"""The table's rows hold z: their direction, up out of the table."""
 BUCKLING_PROGRESS = 0.05
 """The share of the springs' compression beyond ``buckling_compression`` an extra
 local/global iteration must take out for the next one to run (docs/solver.md)."""
@@ -510,7 +511,7 @@ class Simulator:
                 return False
             multipliers = self._bending_step.solve(
                 rhs, positions, np.concatenate([vertex, held]),
-                np.concatenate([direction, np.tile(UP, (held.size, 1))]),
+                np.concatenate([direction, np.tile(TABLE_NORMAL, (held.size, 1))]),
                 np.concatenate([value, np.full(held.size, ground)]))
             push = -multipliers[vertex.size:]  # a row pushes along its direction where λ < 0
             self._table_reaction[:] = 0.0
