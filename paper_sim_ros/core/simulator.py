@@ -47,6 +47,8 @@ TABLE_TOLERANCE = 1e-6
 TABLE_ROWS_MOST = 256
 """Vertices on the table held exactly in the bending solve, at most (Simulator._table_rows:
 each costs a third of a solve once, and the rows' dense system grows with their square)."""
+NO_ROWS = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
+"""The constraint rows (vertex, direction, value) of a sub-step without probes."""
 TABLE_NORMAL = np.array([0.0, 0.0, 1.0])
 """The table's rows hold z: their direction, up out of the table."""
 BUCKLING_PROGRESS = 0.05
@@ -566,6 +568,8 @@ class Simulator:
         probe without a row gets one: left to the stretch pass, it would be pushed out
         alone, denting the sheet around the probe and stretching it. Returns whether the
         rows changed (the solve must run again)."""
+        if not self.probes.count:
+            return False
         vertex, direction, value = self._rows
         keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
         inside = self._inside_probes(positions)
@@ -590,6 +594,9 @@ class Simulator:
         row, so the sheet slides over the probe instead of being dragged through itself)."""
         sheet = self.sheet
         self._probe_from, self._probe_to = probe_from, probe_to
+        if not self.probes.count:  # nothing to hold (nor gripped: grips need a probe)
+            self._rows, self._row_kind = NO_ROWS, NO_ROWS[0]
+            return
         gripped = np.flatnonzero(self._grip_probe >= 0)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
         if self.probes.count:
