@@ -504,26 +504,27 @@ class Simulator:
         # stood some frames is taken to stand about as long again; in a squeeze's yielding
         # it is renewed every other frame, in the demo's drape it stands for seconds)
         standing = max(self.frame - self._bending_factored_at, 1)
-        if self._bending_step.missing_columns(held) > 3 * (TABLE_ITERATIONS - 1) * standing:
+        if held.size > TABLE_ROWS_MOST \
+                or self._bending_step.missing_columns(held) \
+                > 3 * (TABLE_ITERATIONS - 1) * standing:
             return False
-        warm_start = self._table_reaction.copy()
         for _ in range(TABLE_ITERATIONS):
-            if held.size > TABLE_ROWS_MOST:
-                self._table_reaction[:] = warm_start
-                return False
             multipliers = self._bending_step.solve(
                 rhs, positions, np.concatenate([vertex, held]),
                 np.concatenate([direction, np.tile(TABLE_NORMAL, (held.size, 1))]),
                 np.concatenate([value, np.full(held.size, ground)]))
             push = -multipliers[vertex.size:]  # a row pushes along its direction where λ < 0
-            self._table_reaction[:] = 0.0
-            self._table_reaction[held] = np.maximum(push, 0.0)
+            solved = held
             below = eligible & (positions[:, 2] < ground - TABLE_TOLERANCE)
             below[held] = False
             pulling = push < 0.0
             if not (np.any(pulling) or np.any(below)):
                 break
             held = np.concatenate([held[~pulling], np.flatnonzero(below)])
+            if held.size > TABLE_ROWS_MOST:
+                return False  # the reaction as it was: the Uzawa iterations' warm start
+        self._table_reaction[:] = 0.0
+        self._table_reaction[solved] = np.maximum(push, 0.0)
         return True
 
     def _table_uzawa(self, rhs, positions, mass_over_h2) -> None:
@@ -599,9 +600,8 @@ class Simulator:
             return
         gripped = np.flatnonzero(self._grip_probe >= 0)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
-        if self.probes.count:
-            self._contact(positions, start_positions, probe_from, probe_to, True, touched,
-                          table_friction=False)
+        self._contact(positions, start_positions, probe_from, probe_to, True, touched,
+                      table_friction=False)
         touched[gripped] = False
         touched[sheet.pinned] = False
         contact = np.flatnonzero(touched)
