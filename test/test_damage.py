@@ -221,6 +221,29 @@ def test_a_crumpled_sheet_keeps_mass_and_validity_through_simulation():
     assert again.sheet.positions_sha256() == simulator.sheet.positions_sha256()
 
 
+def test_random_damage_is_plastic_and_a_memory_the_paper_cannot_follow_gives_way():
+    """Crumpling lifts creases out of a flat sheet; an isolated crease is not developable,
+    so the paper around it rests in its new shape (no spring starts stretched), and a
+    crease's memory (AUX) that the sheet cannot reach without stretching takes the length
+    the sheet allows: the HINGE springs end within the strain band, the memory never
+    longer than the paper between its ends."""
+    config = SimulationConfig(sheet=SheetConfig(nx=33, ny=33),
+                              solver=SolverConfig(gravity=(0.0, 0.0, 0.0), air_damping=3.0))
+    simulator = Simulator(config)
+    simulator.crumple(100, seed=7)
+    sheet = simulator.sheet
+    assert sheet.strain(HINGE).max() < 1e-12
+    aux = sheet.spring_kind == AUX
+    remembered = sheet.spring_rest_length[aux].copy()
+    assert remembered.size > 40
+    for _ in range(120):
+        simulator.step_frame()
+    strain = sheet.strain(HINGE)
+    assert np.percentile(strain, 99) < 0.005 and strain.max() < 0.05, strain.max()
+    assert np.any(sheet.spring_rest_length[aux] > remembered)
+    assert np.all(sheet.spring_rest_length[aux] <= simulator._memory_longest + 1e-15)
+
+
 def test_check_mesh_reports_broken_invariants():
     sheet = build_flat_sheet(SMALL)
     args = (sheet.vertex_count, sheet.positions, sheet.spring_vertices)
@@ -477,3 +500,10 @@ def test_a_crumpled_sheet_comes_to_rest(seed):
         simulator.step_frame()
     speed = np.linalg.norm(simulator.sheet.velocities, axis=1)
     assert np.percentile(speed, 99) < 1e-3
+    # and it rests unstretched: random damage is plastic and a crease's memory gives where
+    # the paper cannot follow it (Simulator._yield_memory). Measured, seeds 0–4: p99 HINGE
+    # strain 0.35–0.42 %, 6–9 of ~13 000 springs beyond 1 %, the worst 1.3–10 % (it was
+    # 15.8 % p99 and 78 % max, 3 900 springs beyond 1 %).
+    strain = simulator.sheet.strain(HINGE)
+    assert np.percentile(strain, 99) < 0.006
+    assert np.mean(strain > 0.01) < 0.001 and strain.max() < 0.12, strain.max()

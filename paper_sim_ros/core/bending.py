@@ -169,6 +169,16 @@ def hinge_rest_state(positions, quads, rigidity, weights, stiffness, rest_curvat
 
 
 @njit(cache=True)
+def hinge_shape_now(positions, quads, weights, hinges, rest_curvature):
+    """κ of each of ``hinges`` at ``positions``, in its frame, into ``rest_curvature``."""
+    frame = np.empty((3, 3))
+    geometry = np.empty((3, 3))
+    for h in hinges:
+        _frame(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3], frame, geometry)
+        _curvature_in_frame(positions, quads, weights, h, frame, rest_curvature[h])
+
+
+@njit(cache=True)
 def add_bending_targets(positions, quads, weights, stiffness, rest_curvature, hinges, rhs):
     """The local step: the target R κ0 of every hinge in ``hinges`` in its current frame,
     k w_v R κ0 added to ``rhs`` for its four vertices."""
@@ -411,6 +421,20 @@ class SheetBending:
         patches.add_patch_targets(positions, self.stencil, self.rows, self.tangents,
                                   self.patch_weight, self.patch_rest, self._curved_patches,
                                   rhs)
+
+    def take_shape(self, positions: np.ndarray, vertices: np.ndarray) -> None:
+        """Plastic set: the hinges and patches that hold any of ``vertices`` rest in their
+        shape at ``positions`` (random damage's deformation, core/damage.py)."""
+        vertex_count = positions.shape[0]
+        moved = np.zeros(vertex_count, dtype=bool)
+        moved[vertices] = True
+        hinges = np.flatnonzero(moved[self.quads].any(axis=1))
+        hinge_shape_now(positions, self.quads, self.weights, hinges, self.rest_curvature)
+        stencil = self.stencil
+        held = moved[np.where(stencil >= 0, stencil, 0)] & (stencil >= 0)
+        patches.patch_rest_state(positions, stencil, self.rows, self.tangents,
+                                 np.flatnonzero(held.any(axis=1)), self.patch_rest)
+        self._cover()
 
     def yield_to(self, positions: np.ndarray, yield_curvature: float, batch: int = 1) -> int:
         """Plasticity: the hinges bent beyond ``yield_curvature`` [1/m] keep the excess as

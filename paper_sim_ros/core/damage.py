@@ -21,7 +21,7 @@ from .kernels import springs_shorter_than
 from .mesh_editing import MeshEditor, breakable_springs, spring_lengths
 from .probe_compression import ProbeCompression
 from .probes import Probes
-from .sheet import BEND, Sheet
+from .sheet import AUX, BEND, HINGE, Sheet
 
 log = logging.getLogger(__name__)
 
@@ -151,12 +151,17 @@ class DamageModel:
         [min_crease_ratio, 1); a fold gives the BEND spring of an edge an AUX spring of
         rest r·d0 with r in [min_crease_ratio, fold_threshold) and lifts the edge's ends
         to a random side (a flat sheet would otherwise have no side to fold to).
-        Returns the number of events applied (fewer at the vertex cap)."""
+        Random damage is plastic: what it moved rests in its new shape
+        (``moved_by_crumple``). Returns the number of events applied (fewer at the
+        vertex cap)."""
         if count < 0:
             raise ValueError(f'crumple count must be >= 0, got {count}')
         config = self.config
         rng = np.random.default_rng([seed, 0xC3C3])
         editor = MeshEditor(sheet, self.aux_stiffness)
+        first_spring = editor.kind.count
+        moved: list[int] = []
+        folded: list[int] = []
         applied = 0
         for _ in range(count):
             if self._at_cap(editor.vertex_count):
@@ -170,8 +175,9 @@ class DamageModel:
                 upper = max(config.fold_threshold, config.min_crease_ratio)
                 ratio = rng.uniform(config.min_crease_ratio, upper)
                 rest = ratio * float(editor.rest_length.data[spring])
-                self._lift_hinge(editor, spring, ratio, rng)
+                moved += self._lift_hinge(editor, spring, ratio, rng)
                 editor.fold(spring, rest)
+                folded.append(spring)
                 self.folds += 1
             else:
                 breakable = breakable_springs(kinds, editor.spring_vertices.data[:count_now],
@@ -184,25 +190,47 @@ class DamageModel:
                     continue
                 ratio = rng.uniform(config.min_crease_ratio, 1.0)
                 l0 = float(editor.rest_length.data[spring])
-                editor.break_spring(spring, ratio * l0, rng, config.area_conservation)
+                moved.append(editor.break_spring(spring, ratio * l0, rng,
+                                                 config.area_conservation))
                 self.breaks += 1
             applied += 1
         editor.commit()
+        self.moved_by_crumple = np.asarray(moved, dtype=np.int64)
+        _take_shape_as_rest(sheet, self.moved_by_crumple, np.asarray(folded, dtype=np.int64),
+                            first_spring)
         self.creases += editor.creases
         return applied
 
     @staticmethod
     def _lift_hinge(editor: MeshEditor, bend_spring: int, ratio: float,
-                    rng: np.random.Generator) -> None:
+                    rng: np.random.Generator) -> list[int]:
         """Seed a random fold: lift the hinge edge under a BEND spring (r, l) by half the
         height a clean fold to |x_r − x_l| = ratio·d0 would give it, to a random side."""
         r, left = (int(x) for x in editor.spring_vertices.data[bend_spring])
         hinge = editor.hinge_between(r, left)
         if hinge is None:
-            return
+            return []
         d0 = float(editor.rest_length.data[bend_spring])
         lift = 0.25 * d0 * math.sqrt(max(1.0 - ratio * ratio, 0.0))
         side = 1.0 if rng.random() < 0.5 else -1.0
-        for v in hinge:
-            if not editor.pinned.data[v]:
-                editor.positions.data[v] += side * lift * editor.normals.data[v]
+        lifted = [int(v) for v in hinge if not editor.pinned.data[v]]
+        for v in lifted:
+            editor.positions.data[v] += side * lift * editor.normals.data[v]
+        return lifted
+
+
+def _take_shape_as_rest(sheet: Sheet, moved: np.ndarray, folded: np.ndarray,
+                        first_new_spring: int) -> None:
+    """Random damage is plastic: the HINGE and AUX springs at a vertex it moved, and the
+    springs it made, rest at their lengths now. Lifted out of an intact flat sheet, a crease
+    cannot reach its memory length without stretching the paper around it (an isolated
+    crease is not developable); held to it, the crumpled sheet rested at 79 % strain."""
+    touches = np.zeros(sheet.vertex_count, dtype=bool)
+    touches[moved] = True
+    ends = sheet.spring_vertices
+    kind = sheet.spring_kind
+    springs = np.arange(kind.size)
+    shaped = (kind == HINGE) & (
+        touches[ends[:, 0]] | touches[ends[:, 1]] | (springs >= first_new_spring)
+        | np.isin(springs, folded))
+    sheet.spring_rest_length[shaped] = spring_lengths(sheet.positions, ends[shaped])

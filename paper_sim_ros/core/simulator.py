@@ -34,7 +34,7 @@ from .kernels import EPSILON_LENGTH
 from .projective import (ConstrainedSolve, global_step, inertial_step, local_targets,
                          spring_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
-from .topology import vertex_normals
+from .topology import two_edge_path_lengths, vertex_normals
 
 NEAR_PIN_LEVELS = 10
 """Springs within this many hops of a pinned vertex get extra strain-limiting sweeps."""
@@ -192,7 +192,14 @@ class Simulator:
         # held springs enter the global step with a solver weight; bending has its own step
         # (BEND springs, second order in the fold angle, only mark the hinges here)
         held_springs = np.flatnonzero(held)
+        self._held_springs = held_springs
         self._held_ends = sheet.spring_vertices[held_springs]
+        # a crease's memory never outgrows the paper around it (Simulator._yield_memory)
+        self._memory_springs = np.flatnonzero(kind == AUX)
+        hinge = kind == HINGE
+        self._memory_longest = two_edge_path_lengths(
+            sheet.spring_vertices[self._memory_springs], sheet.spring_vertices[hinge],
+            sheet.spring_rest_length[hinge], sheet.vertex_count)
         self._held_rest = sheet.spring_rest_length[held_springs]
         self._global_weight = np.full(held_springs.size, self.config.solver.global_stiffness)
         self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
@@ -274,6 +281,7 @@ class Simulator:
                 and self._bending is not None):
             self._bending.yield_to(self.sheet.positions, damage.yield_curvature,
                                    YIELD_BATCH_FRAMES)
+            self._yield_memory()
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
                                self.sheet.positions - saved_positions):
             self.topology_changed()
@@ -286,6 +294,30 @@ class Simulator:
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
         self.frame += 1
+
+    def _yield_memory(self) -> None:
+        """A crease's memory (AUX spring) that the sheet holds beyond the strain band takes
+        its length as its rest: where a remembered fold cannot be reached without
+        stretching the paper around it, the fold gives, not the paper (a crumpled sheet
+        rested at 79 % strain, 65²). Never longer than the shortest path over two HINGE
+        springs between its ends: a memory that grew in a moment the paper was stretched
+        would hold it stretched."""
+        springs = self._memory_springs
+        if springs.size == 0:
+            return
+        sheet, solver = self.sheet, self.config.solver
+        ends = sheet.spring_vertices[springs]
+        length = np.linalg.norm(sheet.positions[ends[:, 0]] - sheet.positions[ends[:, 1]],
+                                axis=1)
+        rest = sheet.spring_rest_length[springs]
+        new_rest = np.minimum(np.clip(rest, length / (1.0 + solver.max_stretch),
+                                      length / (1.0 - solver.max_compression)),
+                              np.maximum(self._memory_longest, rest))
+        if np.array_equal(new_rest, rest):
+            return
+        sheet.spring_rest_length[springs] = new_rest
+        self._constraint_rest = sheet.spring_rest_length[self._constraint_springs]
+        self._held_rest = sheet.spring_rest_length[self._held_springs]
 
     def _substep(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray) -> None:
         """One sub-step of ``h`` [s], the probes moving from ``probe_from`` to ``probe_to``."""
@@ -728,6 +760,8 @@ class Simulator:
         """Random damage (SPEC §4.3): ``count`` random breaks and folds, seeded."""
         self.damage.crumple(self.sheet, count, seed)
         self.topology_changed()
+        if self._bending is not None:
+            self._bending.take_shape(self.sheet.positions, self.damage.moved_by_crumple)
 
     @property
     def breaks(self) -> int:

@@ -19,6 +19,31 @@ def edge_key(first: np.ndarray, second: np.ndarray, vertex_count: int) -> np.nda
     return low * vertex_count + high
 
 
+def two_edge_path_lengths(pairs: np.ndarray, edges: np.ndarray, lengths: np.ndarray,
+                          vertex_count: int) -> np.ndarray:
+    """(P,) for each vertex pair (a, b) of ``pairs``: the shortest length of a path a–k–b
+    over two of ``edges`` (E, 2) of ``lengths`` (E,); inf where none exists."""
+    source = np.concatenate([edges[:, 0], edges[:, 1]]).astype(np.int64)
+    target = np.concatenate([edges[:, 1], edges[:, 0]]).astype(np.int64)
+    weight = np.concatenate([lengths, lengths])
+    order = np.argsort(source, kind='stable')
+    target, weight = target[order], weight[order]
+    start = np.concatenate([[0], np.cumsum(np.bincount(source, minlength=vertex_count))])
+    first = pairs[:, 0].astype(np.int64)
+    degree = start[first + 1] - start[first]
+    pair = np.repeat(np.arange(pairs.shape[0]), degree)
+    slot = np.repeat(start[first] - np.cumsum(degree) + degree, degree) + np.arange(pair.size)
+    middle, first_leg = target[slot], weight[slot]
+    keys = edge_key(edges[:, 0], edges[:, 1], vertex_count)
+    key_order = np.argsort(keys)
+    wanted = edge_key(middle, pairs[pair, 1], vertex_count)
+    at = np.minimum(np.searchsorted(keys[key_order], wanted), max(keys.size - 1, 0))
+    found = keys[key_order][at] == wanted if keys.size else np.zeros(0, dtype=bool)
+    shortest = np.full(pairs.shape[0], np.inf)
+    np.minimum.at(shortest, pair[found], first_leg[found] + lengths[key_order][at][found])
+    return shortest
+
+
 def mesh_edges(triangles: np.ndarray, vertex_count: int) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges of a triangle mesh and their opposite vertices.
 
