@@ -54,6 +54,7 @@ from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
 from .node_runner import run_node
+from .pose_track import POSE_HISTORY, PoseTrack
 from .node_parameters import (PARAMETER_SPECS, NodeSettings, declared_defaults,
                               parameter_table, settings_from_values)
 from .rerun_logger import RerunRecorder
@@ -64,9 +65,11 @@ OUTPUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE)
 """Reliable, latest only: RViz subscribes reliable by default; best-effort readers connect."""
-POSE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+POSE_QOS = QoSProfile(depth=POSE_HISTORY, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
-"""Depth 1: under a flood only the latest pose waits for the executor."""
+"""The poses of a few frames wait for the executor (the track places each by its stamp;
+with depth 1 a busy tick lost poses, and the probe held still for 50–80 ms, then leapt);
+under a flood no more than these."""
 WARN_EVERY = 2.0
 """Seconds between two warnings of one kind (refused poses, failed ticks)."""
 
@@ -77,11 +80,15 @@ class StartupError(Exception):
 
 @dataclass
 class ProbeInput:
-    """The latest accepted pose of one probe topic."""
+    """The accepted poses of one probe topic: when the latest arrived, and the recent ones
+    by their stamps (where the probe is at each frame's time: pose_track.py)."""
 
     topic: str
-    position: np.ndarray | None = None
     received: Time | None = None
+    track: PoseTrack = field(default_factory=PoseTrack)
+    unstamped: np.ndarray | None = None
+    """The latest pose without a usable stamp, not yet on the track: the next tick puts it at
+    its end (where the probe is once the tick's frames are stepped)."""
 
 
 @dataclass
@@ -339,8 +346,16 @@ class PaperSimNode(Node):
                         f'the origin, farther than contact.max_probe_distance = {limit:g} m',
                         throttle_duration_sec=WARN_EVERY)
         else:
-            probe.position = center
-            probe.received = self.get_clock().now()
+            now = self.get_clock().now()
+            # a pose stamped on this clock is placed by its stamp, any other at a tick's end
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            if stamp_ns == 0 or abs(stamp_ns - now.nanoseconds) > \
+                    self._settings.probe_timeout * 1e9:
+                probe.unstamped = center
+            else:
+                probe.track.add(stamp_ns, center)
+                probe.unstamped = None
+            probe.received = now
             return
         stats.poses_refused += 1
         stats.window_refused += 1
@@ -355,9 +370,7 @@ class PaperSimNode(Node):
                 continue
             age_ns = (now - probe.received).nanoseconds if \
                 now.nanoseconds >= probe.received.nanoseconds else -1
-            if 0 <= age_ns <= timeout_ns:
-                centers[index] = probe.position
-                active[index] = True
+            active[index] = 0 <= age_ns <= timeout_ns
         return centers, np.asarray(self._settings.probe_radii, dtype=np.float64), active
 
     # ------------------------------------------------------------------------- stepping
@@ -386,6 +399,9 @@ class PaperSimNode(Node):
             return
         if due <= 0:
             return
+        # where the last frame ended: the probes' path from there to this tick's last
+        # frame is shared out over its frames, also when frames slipped
+        last_end_ns = self._origin_ns + simulator.frame * dt_ns
         limit = self._settings.max_catchup_frames
         if due > limit:
             slipped = due - limit
@@ -394,19 +410,25 @@ class PaperSimNode(Node):
             self._stats.window_slipped += slipped
             due = limit
         centers, radii, active = self._probe_state(now)
-        previous = simulator.probes
-        # a probe that was already acting moves to its new pose evenly over the frames of
-        # this tick (instead of jumping in the first one) when the tick catches up
-        moving = active & previous.active if previous.count == len(active) \
-            else np.zeros_like(active)
         stats = self._stats
+        tick_end_ns = self._origin_ns + (simulator.frame + due) * dt_ns
+        for probe in self._probes:
+            if probe.unstamped is not None:
+                # it moved there over this tick, from where it stood at the last frame
+                newest = probe.track.newest_stamp
+                if newest is not None and newest < last_end_ns:
+                    probe.track.add(int(last_end_ns), probe.track.at(int(last_end_ns)))
+                probe.track.add(int(round(tick_end_ns)), probe.unstamped)
+                probe.unstamped = None
         for frame in range(due):
-            frame_centers = centers.copy()
-            if moving.any():
-                share = (frame + 1) / due
-                frame_centers[moving] = previous.end[moving] + share * (
-                    centers[moving] - previous.end[moving])
-            self._set_probes(frame_centers, radii, active)
+            # each probe where its poses put it at the end of this frame, not at its latest
+            # pose: poses arrive in bursts (pose_track.py); a tick behind the clock steps
+            # the path it lost in fewer, longer strides rather than one jump
+            frame_end_ns = int(round(last_end_ns + (frame + 1) / due
+                                     * (tick_end_ns - last_end_ns)))
+            for index in np.flatnonzero(active):
+                centers[index] = self._probes[index].track.at(frame_end_ns)
+            self._set_probes(centers, radii, active)
             started = time.perf_counter()
             simulator.step_frame()
             seconds = time.perf_counter() - started
