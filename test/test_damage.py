@@ -238,8 +238,8 @@ def test_random_damage_is_plastic_and_a_memory_the_paper_cannot_follow_gives_way
     assert remembered.size > 40
     for _ in range(120):
         simulator.step_frame()
-    strain = sheet.strain(HINGE)
-    assert np.percentile(strain, 99) < 0.005 and strain.max() < 0.05, strain.max()
+    strain = np.abs(sheet.strain(HINGE))
+    assert np.percentile(strain, 99) < 0.006 and strain.max() < 0.05, strain.max()
     assert np.any(sheet.spring_rest_length[aux] > remembered)
     assert np.all(sheet.spring_rest_length[aux] <= simulator._memory_longest + 1e-15)
 
@@ -501,9 +501,9 @@ def test_a_crumpled_sheet_comes_to_rest(seed):
     speed = np.linalg.norm(simulator.sheet.velocities, axis=1)
     assert np.percentile(speed, 99) < 1e-3
     # and it rests unstretched: random damage is plastic and a crease's memory gives where
-    # the paper cannot follow it (Simulator._yield_memory). Measured, seeds 0–4: p99 HINGE
-    # strain 0.35–0.42 %, 6–9 of ~13 000 springs beyond 1 %, the worst 1.3–10 % (it was
-    # 15.8 % p99 and 78 % max, 3 900 springs beyond 1 %).
-    strain = simulator.sheet.strain(HINGE)
-    assert np.percentile(strain, 99) < 0.006
-    assert np.mean(strain > 0.01) < 0.001 and strain.max() < 0.12, strain.max()
+    # the paper cannot follow it (Simulator._yield_memory). Measured, seeds 0–4: p99 |HINGE
+    # strain| 0.41–0.55 %, 9–22 of ~12 800 springs beyond 1 %, the worst 2.1–10.4 % (it
+    # was ≥ 15.8 % p99 and 79 % max, ≥ 3 900 springs beyond 1 %).
+    strain = np.abs(simulator.sheet.strain(HINGE))
+    assert np.percentile(strain, 99) < 0.007
+    assert np.mean(strain > 0.01) < 0.003 and strain.max() < 0.12, strain.max()
