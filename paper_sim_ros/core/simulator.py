@@ -282,8 +282,10 @@ class Simulator:
             self._bending.yield_to(self.sheet.positions, damage.yield_curvature,
                                    YIELD_BATCH_FRAMES)
             self._yield_memory()
+        creases_before = len(self.damage.creases)
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
                                self.sheet.positions - saved_positions):
+            self._keep_creases_out(self.damage.creases[creases_before:])
             self.topology_changed()
         elif self._global_step is not None and self._global_step.step.stale:
             self._factor_global_steps()  # the updates since the last factor cost more
@@ -294,6 +296,44 @@ class Simulator:
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
         self.frame += 1
+
+    def _keep_creases_out(self, creases: list[tuple[int, int, int]]) -> None:
+        """A break puts its new vertex m off the sheet, to the side the sheet bulges; where
+        that is inside a probe (flattened on the table, as the contact has it) or under the
+        table (the squeeze's only penetrations, up to 0.6 mm at 65², 2.6 mm at 33²), m
+        bulges to the other side, or, if that is inside too, goes to the nearest point
+        outside: the probe's surface, or the table under a fingertip pressed into it."""
+        if not creases:
+            return
+        positions = self.sheet.positions
+        probes, contact = self.probes, self.config.contact
+        ground = contact.ground_enabled
+        floor = contact.ground_height if ground else -np.inf
+        flag = np.zeros(1, dtype=bool)
+
+        def inside(point: np.ndarray) -> bool:
+            kernels.inside_probes(point[None], probes.end, probes.radius, probes.active,
+                                  contact.ground_height, ground, 0.0, flag)
+            return point[2] < floor or bool(flag[0])
+        for i, m, j in creases:
+            if not inside(positions[m]):
+                continue
+            mirrored = positions[i] + positions[j] - positions[m]
+            if not inside(mirrored):
+                positions[m] = mirrored
+                continue
+            point = positions[m].copy()
+            for centre, radius in zip(probes.end[probes.active], probes.radius[probes.active]):
+                offset = point - centre
+                distance = float(np.linalg.norm(offset))
+                if distance >= radius:
+                    continue
+                if point[2] - floor < radius - distance:
+                    point[2] = floor
+                else:
+                    point = centre + offset * (radius / max(distance, 1e-12))
+            point[2] = max(point[2], floor)
+            positions[m] = point
 
     def _yield_memory(self) -> None:
         """A crease's memory (AUX spring) that the sheet holds beyond the strain band takes
