@@ -224,23 +224,29 @@ def test_a_crumpled_sheet_keeps_mass_and_validity_through_simulation():
 def test_random_damage_is_plastic_and_a_memory_the_paper_cannot_follow_gives_way():
     """Crumpling lifts creases out of a flat sheet; an isolated crease is not developable,
     so the paper around it rests in its new shape (no spring starts stretched), and a
-    crease's memory (AUX) that the sheet cannot reach without stretching takes the length
-    the sheet allows: the HINGE springs end within the strain band, the memory never
-    longer than the paper between its ends."""
+    crease's memory (AUX) pulls towards its length gradually, only while the sheet follows
+    unstretched, keeping what it reached: the HINGE springs stay near the strain band all
+    along, some memories are reached in part, none is longer than the paper between its
+    ends. Set at once, the memories strained this sheet 40 % and more."""
     config = SimulationConfig(sheet=SheetConfig(nx=33, ny=33),
                               solver=SolverConfig(gravity=(0.0, 0.0, 0.0), air_damping=3.0))
     simulator = Simulator(config)
     simulator.crumple(100, seed=7)
     sheet = simulator.sheet
     assert sheet.strain(HINGE).max() < 1e-12
-    aux = sheet.spring_kind == AUX
-    remembered = sheet.spring_rest_length[aux].copy()
-    assert remembered.size > 40
+    aux = np.flatnonzero(sheet.spring_kind == AUX)
+    target = simulator._memory_target[aux].copy()
+    started = sheet.spring_rest_length[aux].copy()
+    assert np.isfinite(target).sum() > 40 and np.all(started[np.isfinite(target)] > target[
+        np.isfinite(target)])
+    worst = 0.0
     for _ in range(120):
         simulator.step_frame()
+        worst = max(worst, simulator.max_strain())
     strain = np.abs(sheet.strain(HINGE))
-    assert np.percentile(strain, 99) < 0.006 and strain.max() < 0.05, strain.max()
-    assert np.any(sheet.spring_rest_length[aux] > remembered)
+    assert worst < 0.03 and np.percentile(strain, 99) < 0.004, (worst, strain.max())
+    assert not np.isfinite(simulator._memory_target).any()
+    assert np.any(sheet.spring_rest_length[aux] < 0.99 * started)
     assert np.all(sheet.spring_rest_length[aux] <= simulator._memory_longest + 1e-15)
 
 
@@ -521,10 +527,11 @@ def test_a_crumpled_sheet_comes_to_rest(seed):
         simulator.step_frame()
     speed = np.linalg.norm(simulator.sheet.velocities, axis=1)
     assert np.percentile(speed, 99) < 1e-3
-    # and it rests unstretched: random damage is plastic and a crease's memory gives where
-    # the paper cannot follow it (Simulator._yield_memory). Measured, seeds 0–4: p99 |HINGE
-    # strain| 0.41–0.55 %, 9–22 of ~12 800 springs beyond 1 %, the worst 2.1–10.4 % (it
-    # was ≥ 15.8 % p99 and 79 % max, ≥ 3 900 springs beyond 1 %).
+    # and it is never stretched, at rest or on the way: random damage is plastic and a
+    # crease's memory pulls only as far as the paper follows (Simulator._yield_memory).
+    # Measured, seeds 0–4: over the run 1.1–2.6 %, at rest p99 |HINGE strain| 0.30 %, the
+    # worst 0.30–1.08 % (it was 79 % and ≥ 15.8 % p99, ≥ 3 900 springs beyond 1 %).
     strain = np.abs(simulator.sheet.strain(HINGE))
-    assert np.percentile(strain, 99) < 0.007
-    assert np.mean(strain > 0.01) < 0.003 and strain.max() < 0.12, strain.max()
+    assert metrics['max_strain'] < 0.04, metrics['max_strain']
+    assert np.percentile(strain, 99) < 0.004
+    assert np.sum(strain > 0.01) <= 2 and strain.max() < 0.02, strain.max()

@@ -64,6 +64,15 @@ component, all of it."""
 CONTACT_ROW_PASSES = 3
 """Solves per local/global iteration, at most, while its contact rows settle (rows that
 pull let go, vertices carried into a probe given one: Simulator._settle_contact_rows)."""
+MEMORY_PULL_RATE = 0.5
+"""A random crease's memory pulls its ends together by at most this share of their
+distance a second (Simulator._yield_memory): set at once, the memories of a crumple
+strained the sheet 38–72 % in its first frames (65²); pulled at 0.5 /s, 1.1–2.6 %."""
+MEMORY_PROGRESS = 0.25
+"""... while they come closer by this share of the pull a frame, and no HINGE spring at
+either end is strained by more than MEMORY_STRAIN; else the memory keeps what it
+reached."""
+MEMORY_STRAIN = 0.01
 YIELD_BATCH_FRAMES = 6
 """Patches that yield are dropped together once this many frames have passed since the
 first of them (SheetBending.yield_to): each drop factorises the bending system again
@@ -94,6 +103,9 @@ class Simulator:
         self._table_reaction = np.zeros(self.sheet.vertex_count)
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
         self._bending = None  # rest angles from the initial sheet
+        self._memory_target = np.zeros(0)
+        """Per spring, the length a random crease's memory pulls towards (NaN: none)."""
+        self._memory_length = np.zeros(0)
         self._global_step = self._bending_step = None  # factored anew
         self._probe_from = self._probe_to = np.zeros((0, 3))
         """Where the probes are at the start and the end of the current sub-step."""
@@ -196,6 +208,10 @@ class Simulator:
         self._held_ends = sheet.spring_vertices[held_springs]
         # a crease's memory never outgrows the paper around it (Simulator._yield_memory)
         self._memory_springs = np.flatnonzero(kind == AUX)
+        # springs are only ever appended: the targets of the old ones stand
+        added = kind.size - self._memory_target.size
+        self._memory_target = np.concatenate([self._memory_target, np.full(added, np.nan)])
+        self._memory_length = np.concatenate([self._memory_length, np.full(added, np.inf)])
         hinge = kind == HINGE
         self._memory_longest = two_edge_path_lengths(
             sheet.spring_vertices[self._memory_springs], sheet.spring_vertices[hinge],
@@ -281,6 +297,7 @@ class Simulator:
                 and self._bending is not None):
             self._bending.yield_to(self.sheet.positions, damage.yield_curvature,
                                    YIELD_BATCH_FRAMES)
+        if solver.method == 'constrained':
             self._yield_memory()
         creases_before = len(self.damage.creases)
         if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
@@ -341,7 +358,9 @@ class Simulator:
         stretching the paper around it, the fold gives, not the paper (a crumpled sheet
         rested at 79 % strain, 65²). Never longer than the shortest path over two HINGE
         springs between its ends: a memory that grew in a moment the paper was stretched
-        would hold it stretched."""
+        would hold it stretched. A random crease's memory pulls towards its target at
+        MEMORY_PULL_RATE while its ends still come closer unstretched, and keeps what it
+        reached when they stop."""
         springs = self._memory_springs
         if springs.size == 0:
             return
@@ -353,9 +372,36 @@ class Simulator:
         new_rest = np.minimum(np.clip(rest, length / (1.0 + solver.max_stretch),
                                       length / (1.0 - solver.max_compression)),
                               np.maximum(self._memory_longest, rest))
+        target = self._memory_target[springs]
+        pending = np.isfinite(target)
+        if pending.any():
+            pull = MEMORY_PULL_RATE * solver.dt
+            closing = length < self._memory_length[springs] * (1.0 - MEMORY_PROGRESS * pull)
+            reached = np.maximum(target, length * (1.0 - pull))
+            # ... and only while the paper at its ends follows unstretched
+            hinge = sheet.spring_kind == HINGE
+            hinge_ends = sheet.spring_vertices[hinge]
+            hinge_strain = np.abs(np.linalg.norm(
+                sheet.positions[hinge_ends[:, 0]] - sheet.positions[hinge_ends[:, 1]], axis=1)
+                / sheet.spring_rest_length[hinge] - 1.0)
+            vertex_strain = np.zeros(sheet.vertex_count)
+            np.maximum.at(vertex_strain, hinge_ends[:, 0], hinge_strain)
+            np.maximum.at(vertex_strain, hinge_ends[:, 1], hinge_strain)
+            unstretched = np.maximum(vertex_strain[ends[:, 0]],
+                                     vertex_strain[ends[:, 1]]) < MEMORY_STRAIN
+            pulls = pending & unstretched & (closing
+                                             | (self._memory_length[springs] == np.inf))
+            new_rest = np.where(pulls, reached, new_rest)
+            done = pending & (~pulls | (reached <= target))
+            self._memory_target[springs[done]] = np.nan
+            self._memory_length[springs] = length
         if np.array_equal(new_rest, rest):
             return
         sheet.spring_rest_length[springs] = new_rest
+        self._rest_lengths_changed()
+
+    def _rest_lengths_changed(self) -> None:
+        sheet = self.sheet
         self._constraint_rest = sheet.spring_rest_length[self._constraint_springs]
         self._held_rest = sheet.spring_rest_length[self._held_springs]
 
@@ -800,8 +846,21 @@ class Simulator:
         """Random damage (SPEC §4.3): ``count`` random breaks and folds, seeded."""
         self.damage.crumple(self.sheet, count, seed)
         self.topology_changed()
-        if self._bending is not None:
-            self._bending.take_shape(self.sheet.positions, self.damage.moved_by_crumple)
+        if self.config.solver.method != 'constrained':
+            return  # springs that are forces: the memories pull as Eq. 6 has them
+        self._bending.take_shape(self.sheet.positions, self.damage.moved_by_crumple)
+        # a crumple's creases pull the sheet towards their memory frame by frame, not at
+        # once (Simulator._yield_memory): their rests start at the lengths they have
+        sheet = self.sheet
+        springs = self._memory_springs
+        ends = sheet.spring_vertices[springs]
+        length = np.linalg.norm(sheet.positions[ends[:, 0]] - sheet.positions[ends[:, 1]],
+                                axis=1)
+        pulling = sheet.spring_rest_length[springs] < length
+        self._memory_target[springs[pulling]] = sheet.spring_rest_length[springs[pulling]]
+        sheet.spring_rest_length[springs[pulling]] = length[pulling]
+        self._memory_length[:] = np.inf
+        self._rest_lengths_changed()
 
     @property
     def breaks(self) -> int:
