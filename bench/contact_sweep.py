@@ -1,7 +1,7 @@
 """Contact over scenarios, grids and seeds: what issue 13 asks of every built-in scenario.
 
     .venv/bin/python bench/contact_sweep.py [--scenarios press drag ...] [--grids 33 65]
-        [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage]
+        [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4]
 
 Per run: max HINGE strain over the run, deepest vertex inside a probe and below the table
 (beyond a pressed probe's dimple), breaks, folds, relaxed deviation, mesh validity, mass
@@ -27,8 +27,9 @@ from paper_sim_ros.core.runner import build_simulator  # noqa: E402
 from paper_sim_ros.core.scenarios import BUILTIN_SCENARIOS  # noqa: E402
 
 
-def measure(name: str, grid: int, seed: int, damage: bool) -> dict:
-    scenario = load_scenario(name, grid=grid, seed=seed, damage_enabled=damage)
+def measure(name: str, grid: int, seed: int, damage: bool, substeps: int | None) -> dict:
+    scenario = load_scenario(name, grid=grid, seed=seed, damage_enabled=damage,
+                             substeps=substeps)
     simulator = build_simulator(scenario)
     mass = simulator.sheet.vertex_mass
 
@@ -69,8 +70,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2, 3, 4])
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--no-damage', action='store_true')
+    parser.add_argument('--substeps', type=int, default=None,
+                        help="sub-steps per frame (default: each scenario's own)")
     args = parser.parse_args(argv)
-    runs = [(name, grid, seed, not args.no_damage) for name in args.scenarios
+    runs = [(name, grid, seed, not args.no_damage, args.substeps) for name in args.scenarios
             for grid in args.grids for seed in args.seeds]
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
