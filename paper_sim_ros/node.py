@@ -54,7 +54,7 @@ from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
 from .node_runner import run_node
-from .pose_track import POSE_HISTORY, PoseTrack
+from .pose_track import PoseTrack
 from .node_parameters import (PARAMETER_SPECS, NodeSettings, declared_defaults,
                               parameter_table, settings_from_values)
 from .rerun_logger import RerunRecorder
@@ -65,11 +65,10 @@ OUTPUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE)
 """Reliable, latest only: RViz subscribes reliable by default; best-effort readers connect."""
-POSE_QOS = QoSProfile(depth=POSE_HISTORY, history=HistoryPolicy.KEEP_LAST,
+POSE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
-"""The poses of a few frames wait for the executor (the track places each by its stamp;
-with depth 1 a busy tick lost poses, and the probe held still for 50–80 ms, then leapt);
-under a flood no more than these."""
+"""Depth 1: under a flood only the latest pose waits for the executor (the track places
+each pose it gets by its stamp, and extrapolates over a missed one)."""
 WARN_EVERY = 2.0
 """Seconds between two warnings of one kind (refused poses, failed ticks)."""
 
