@@ -31,6 +31,7 @@ from .bending import SheetBending
 from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
+from .mesh_editing import spring_lengths
 from .projective import (ConstrainedSolve, global_step, inertial_step, local_targets,
                          spring_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
@@ -366,8 +367,7 @@ class Simulator:
             return
         sheet, solver = self.sheet, self.config.solver
         ends = sheet.spring_vertices[springs]
-        length = np.linalg.norm(sheet.positions[ends[:, 0]] - sheet.positions[ends[:, 1]],
-                                axis=1)
+        length = spring_lengths(sheet.positions, ends)
         rest = sheet.spring_rest_length[springs]
         new_rest = np.minimum(np.clip(rest, length / (1.0 + solver.max_stretch),
                                       length / (1.0 - solver.max_compression)),
@@ -378,19 +378,16 @@ class Simulator:
             pull = MEMORY_PULL_RATE * solver.dt
             closing = length < self._memory_length[springs] * (1.0 - MEMORY_PROGRESS * pull)
             reached = np.maximum(target, length * (1.0 - pull))
-            # ... and only while the paper at its ends follows unstretched
-            hinge = sheet.spring_kind == HINGE
-            hinge_ends = sheet.spring_vertices[hinge]
-            hinge_strain = np.abs(np.linalg.norm(
-                sheet.positions[hinge_ends[:, 0]] - sheet.positions[hinge_ends[:, 1]], axis=1)
-                / sheet.spring_rest_length[hinge] - 1.0)
+            # ... and only while the paper at its ends follows unstretched (closing holds
+            # for the first pull: its last length is infinite)
+            hinge_ends = sheet.spring_vertices[sheet.spring_kind == HINGE]
+            hinge_strain = np.abs(sheet.strain(HINGE))
             vertex_strain = np.zeros(sheet.vertex_count)
             np.maximum.at(vertex_strain, hinge_ends[:, 0], hinge_strain)
             np.maximum.at(vertex_strain, hinge_ends[:, 1], hinge_strain)
             unstretched = np.maximum(vertex_strain[ends[:, 0]],
                                      vertex_strain[ends[:, 1]]) < MEMORY_STRAIN
-            pulls = pending & unstretched & (closing
-                                             | (self._memory_length[springs] == np.inf))
+            pulls = pending & unstretched & closing
             new_rest = np.where(pulls, reached, new_rest)
             done = pending & (~pulls | (reached <= target))
             self._memory_target[springs[done]] = np.nan
@@ -853,9 +850,7 @@ class Simulator:
         # once (Simulator._yield_memory): their rests start at the lengths they have
         sheet = self.sheet
         springs = self._memory_springs
-        ends = sheet.spring_vertices[springs]
-        length = np.linalg.norm(sheet.positions[ends[:, 0]] - sheet.positions[ends[:, 1]],
-                                axis=1)
+        length = spring_lengths(sheet.positions, sheet.spring_vertices[springs])
         pulling = sheet.spring_rest_length[springs] < length
         self._memory_target[springs[pulling]] = sheet.spring_rest_length[springs[pulling]]
         sheet.spring_rest_length[springs[pulling]] = length[pulling]
