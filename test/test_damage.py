@@ -529,9 +529,11 @@ def test_a_crumpled_sheet_comes_to_rest(seed):
     assert np.percentile(speed, 99) < 1e-3
     # and it is never stretched, at rest or on the way: random damage is plastic and a
     # crease's memory pulls only as far as the paper follows (Simulator._yield_memory).
-    # Measured, seeds 0–4: over the run 1.1–2.6 %, at rest p99 |HINGE strain| 0.30 %, the
-    # worst 0.30–1.08 % (it was 79 % and ≥ 15.8 % p99, ≥ 3 900 springs beyond 1 %).
+    # Measured, seeds 0–4: over the run 1.1–2.3 %, at rest p99 |HINGE strain| 0.30 %, the
+    # worst 0.31–0.39 % (it was 79 % and ≥ 15.8 % p99, ≥ 3 900 springs beyond 1 %; then
+    # 0.30–1.08 %, until a memory gave its pull where the paper at its ends is held
+    # beyond twice the band). Issue 14 asks < 1 % at rest.
     strain = np.abs(simulator.sheet.strain(HINGE))
     assert metrics['max_strain'] < 0.04, metrics['max_strain']
     assert np.percentile(strain, 99) < 0.004
-    assert np.sum(strain > 0.01) <= 2 and strain.max() < 0.02, strain.max()
+    assert strain.max() < 0.01, strain.max()
