@@ -422,6 +422,19 @@ def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
 
 
 @njit(cache=True)
+def vertex_max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
+    """(V,) the largest |l/l0 - 1| of the springs of one kind at each vertex."""
+    largest = np.zeros(positions.shape[0])
+    for s in range(spring_vertices.shape[0]):
+        if spring_kind[s] == kind:
+            strain = abs(_spring_strain(positions, spring_vertices, rest_length, s))
+            for end in range(2):
+                v = spring_vertices[s, end]
+                largest[v] = max(largest[v], strain)
+    return largest
+
+
+@njit(cache=True)
 def springs_shorter_than(positions, spring_vertices, rest_length, spring_kind, kind, ratio):
     """Indices, ascending, of the springs of one kind shorter than ``ratio`` × rest length
     (one pass, no (S, 3) temporaries: the damage check runs it every frame)."""

@@ -71,9 +71,14 @@ distance a second (Simulator._yield_memory): set at once, the memories of a crum
 strained the sheet 38–72 % in its first frames (65²); pulled at 0.5 /s, 1.1–2.6 %."""
 MEMORY_PROGRESS = 0.25
 """... while they come closer by this share of the pull a frame, and no HINGE spring at
-either end is strained by more than MEMORY_STRAIN; else the memory keeps what it
-reached."""
-MEMORY_STRAIN = 0.01
+either end is strained by more than MEMORY_STRAIN_BANDS strain bands; else the memory
+keeps what it reached."""
+MEMORY_STRAIN_BANDS = 2.0
+"""Where a HINGE spring at a memory's ends is strained beyond this many strain bands
+(0.6 % by default) the paper no longer follows the memory: a pulling memory stops
+(with 1 %, one pull more took a crumpled sheet to 2.33 %, 65², seed 2), and any memory
+gives all of its pull (within the band it still pulled as hard as the band let it, and
+held a short edge 1.08 % short at rest, 65², seed 1)."""
 YIELD_BATCH_FRAMES = 6
 """Patches that yield are dropped together once this many frames have passed since the
 first of them (SheetBending.yield_to): each drop factorises the bending system again
@@ -361,7 +366,8 @@ class Simulator:
         springs between its ends: a memory that grew in a moment the paper was stretched
         would hold it stretched. A random crease's memory pulls towards its target at
         MEMORY_PULL_RATE while its ends still come closer unstretched, and keeps what it
-        reached when they stop."""
+        reached when they stop. Where the paper at its ends is held beyond
+        MEMORY_STRAIN_BANDS strain bands, a memory gives all of its pull."""
         springs = self._memory_springs
         if springs.size == 0:
             return
@@ -373,16 +379,13 @@ class Simulator:
                                       length / (1.0 - solver.max_compression)),
                               np.maximum(self._memory_longest, rest))
         # the paper at its ends: the largest |HINGE strain| there
-        hinge_ends = sheet.spring_vertices[sheet.spring_kind == HINGE]
-        hinge_strain = np.abs(sheet.strain(HINGE))
-        vertex_strain = np.zeros(sheet.vertex_count)
-        np.maximum.at(vertex_strain, hinge_ends[:, 0], hinge_strain)
-        np.maximum.at(vertex_strain, hinge_ends[:, 1], hinge_strain)
+        vertex_strain = kernels.vertex_max_abs_strain(sheet.positions, sheet.spring_vertices,
+                                                      sheet.spring_rest_length,
+                                                      sheet.spring_kind, HINGE)
         end_strain = np.maximum(vertex_strain[ends[:, 0]], vertex_strain[ends[:, 1]])
-        # where the paper at its ends is held beyond twice the band, the memory gives all
-        # of its pull: within the band it still pulls as hard as the band lets it, and
-        # against a short edge that was enough to hold it 1.08 % short (65², seed 1)
-        strained = end_strain > 2.0 * max(solver.max_stretch, solver.max_compression)
+        followed = MEMORY_STRAIN_BANDS * max(solver.max_stretch, solver.max_compression)
+        # where the paper at its ends is held beyond that, the memory gives all of its pull
+        strained = end_strain > followed
         new_rest = np.where(strained,
                             np.minimum(length, np.maximum(self._memory_longest, rest)),
                             new_rest)
@@ -394,7 +397,7 @@ class Simulator:
             reached = np.maximum(target, length * (1.0 - pull))
             # ... and only while the paper at its ends follows unstretched (closing holds
             # for the first pull: its last length is infinite)
-            unstretched = end_strain < MEMORY_STRAIN
+            unstretched = end_strain <= followed
             pulls = pending & unstretched & closing
             new_rest = np.where(pulls, reached, new_rest)
             done = pending & (~pulls | (reached <= target))
