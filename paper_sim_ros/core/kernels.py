@@ -449,16 +449,6 @@ def springs_shorter_than(positions, spring_vertices, rest_length, spring_kind, k
 
 
 @njit(cache=True)
-def excess_compression(positions, spring_vertices, rest_length, threshold):
-    """Σ max(0, 1 − l/l0 − threshold) over the springs: how squeezed a sheet still is."""
-    total = 0.0
-    for s in range(spring_vertices.shape[0]):
-        total += max(0.0, -_spring_strain(positions, spring_vertices, rest_length, s)
-                     - threshold)
-    return total
-
-
-@njit(cache=True)
 def lift_squeezed(positions, inverse_mass, spring_vertices, rest_length, ground_height,
                   threshold):
     """Raise each free vertex lying on the table whose springs are squeezed by more than

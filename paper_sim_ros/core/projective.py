@@ -26,10 +26,13 @@ from .kernels import EPSILON_LENGTH
 
 
 @njit(cache=True)
-def local_targets(positions, weighted_inertia, spring_vertices, rest_length, weight, rhs):
+def local_targets(positions, weighted_inertia, spring_vertices, rest_length, weight, rhs,
+                  compression_threshold=0.0):
     """The springs' part of the global step's right-hand side into ``rhs``: M y / h²
-    (``weighted_inertia``) plus k_s A_sᵀ d_s for every spring."""
+    (``weighted_inertia``) plus k_s A_sᵀ d_s for every spring. Returns, from the same
+    lengths, how squeezed the springs are: Σ max(0, 1 − l/l0 − compression_threshold)."""
     rhs[:, :] = weighted_inertia
+    excess = 0.0
     for s in range(spring_vertices.shape[0]):
         i = spring_vertices[s, 0]
         j = spring_vertices[s, 1]
@@ -45,6 +48,8 @@ def local_targets(positions, weighted_inertia, spring_vertices, rest_length, wei
         rhs[i, 0] -= scale * dx
         rhs[i, 1] -= scale * dy
         rhs[i, 2] -= scale * dz
+        excess += max(0.0, -(length / rest_length[s] - 1.0) - compression_threshold)
+    return excess
 
 
 @njit(cache=True)

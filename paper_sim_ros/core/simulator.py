@@ -588,12 +588,14 @@ class Simulator:
         buckling_compression = self.config.solver.buckling_compression
         excess = np.inf
         for _ in range(most):
-            now = kernels.excess_compression(positions, self._held_ends, self._held_rest,
-                                             buckling_compression)
+            # the local step measures the compression it starts from (one pass, not two)
+            now = local_targets(positions, weighted_inertia, self._held_ends,
+                                self._held_rest, self._global_weight, rhs,
+                                buckling_compression)
             if now == 0.0 or now > (1.0 - BUCKLING_PROGRESS) * excess:
                 return
             excess = now
-            self._spring_iteration(positions, weighted_inertia, rhs)
+            self._global_iteration(positions, rhs)
 
     def _bending_solve(self, rhs, positions, mass_over_h2) -> None:
         """The bending step with the table's reaction in it. Projecting the solution onto
@@ -679,10 +681,14 @@ class Simulator:
             momentum = next_momentum
 
     def _spring_iteration(self, positions, weighted_inertia, rhs) -> None:
-        """One local/global iteration of the held springs (core/projective.py), the contact
-        rows settled on its solution (``_settle_contact_rows``)."""
+        """One local/global iteration of the held springs (core/projective.py)."""
         local_targets(positions, weighted_inertia, self._held_ends, self._held_rest,
                       self._global_weight, rhs)
+        self._global_iteration(positions, rhs)
+
+    def _global_iteration(self, positions, rhs) -> None:
+        """The springs' global step from the local step's ``rhs``, the contact rows settled
+        on its solution (``_settle_contact_rows``)."""
         multipliers = self._global_step.solve(rhs, positions, *self._rows)
         for _ in range(CONTACT_ROW_PASSES):
             if not self._settle_contact_rows(positions, multipliers):
