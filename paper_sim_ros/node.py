@@ -359,10 +359,9 @@ class PaperSimNode(Node):
         stats.poses_refused += 1
         stats.window_refused += 1
 
-    def _probe_state(self, now: Time) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        count = len(self._probes)
-        centers = np.zeros((count, 3))
-        active = np.zeros(count, dtype=bool)
+    def _active_probes(self, now: Time) -> np.ndarray:
+        """(P,) bool: the probes whose latest pose is within ``probe_timeout`` of ``now``."""
+        active = np.zeros(len(self._probes), dtype=bool)
         timeout_ns = self._settings.probe_timeout * 1e9
         for index, probe in enumerate(self._probes):
             if probe.received is None:
@@ -370,7 +369,7 @@ class PaperSimNode(Node):
             age_ns = (now - probe.received).nanoseconds if \
                 now.nanoseconds >= probe.received.nanoseconds else -1
             active[index] = 0 <= age_ns <= timeout_ns
-        return centers, np.asarray(self._settings.probe_radii, dtype=np.float64), active
+        return active
 
     # ------------------------------------------------------------------------- stepping
     def _on_tick(self) -> None:
@@ -408,7 +407,9 @@ class PaperSimNode(Node):
             self._stats.slipped_frames += slipped
             self._stats.window_slipped += slipped
             due = limit
-        centers, radii, active = self._probe_state(now)
+        active = self._active_probes(now)
+        centers = np.zeros((active.size, 3))
+        radii = np.asarray(self._settings.probe_radii, dtype=np.float64)
         stats = self._stats
         tick_end_ns = self._origin_ns + (simulator.frame + due) * dt_ns
         for probe in self._probes:

@@ -21,7 +21,7 @@ from .kernels import springs_shorter_than
 from .mesh_editing import MeshEditor, breakable_springs, spring_lengths
 from .probe_compression import ProbeCompression
 from .probes import Probes
-from .sheet import AUX, BEND, HINGE, Sheet
+from .sheet import BEND, HINGE, Sheet
 
 log = logging.getLogger(__name__)
 
@@ -161,7 +161,6 @@ class DamageModel:
         editor = MeshEditor(sheet, self.aux_stiffness)
         first_spring = editor.kind.count
         moved: list[int] = []
-        folded: list[int] = []
         applied = 0
         for _ in range(count):
             if self._at_cap(editor.vertex_count):
@@ -177,7 +176,6 @@ class DamageModel:
                 rest = ratio * float(editor.rest_length.data[spring])
                 moved += self._lift_hinge(editor, spring, ratio, rng)
                 editor.fold(spring, rest)
-                folded.append(spring)
                 self.folds += 1
             else:
                 breakable = breakable_springs(kinds, editor.spring_vertices.data[:count_now],
@@ -196,8 +194,7 @@ class DamageModel:
             applied += 1
         editor.commit()
         self.moved_by_crumple = np.asarray(moved, dtype=np.int64)
-        _take_shape_as_rest(sheet, self.moved_by_crumple, np.asarray(folded, dtype=np.int64),
-                            first_spring)
+        _take_shape_as_rest(sheet, self.moved_by_crumple, first_spring)
         self.creases += editor.creases
         return applied
 
@@ -219,18 +216,16 @@ class DamageModel:
         return lifted
 
 
-def _take_shape_as_rest(sheet: Sheet, moved: np.ndarray, folded: np.ndarray,
-                        first_new_spring: int) -> None:
-    """Random damage is plastic: the HINGE and AUX springs at a vertex it moved, and the
-    springs it made, rest at their lengths now. Lifted out of an intact flat sheet, a crease
-    cannot reach its memory length without stretching the paper around it (an isolated
-    crease is not developable); held to it, the crumpled sheet rested at 79 % strain."""
+def _take_shape_as_rest(sheet: Sheet, moved: np.ndarray, first_new_spring: int) -> None:
+    """Random damage is plastic: the HINGE springs at a vertex it moved, and the ones it
+    made, rest at their lengths now (its creases' memories, AUX springs, pull gradually:
+    Simulator.crumple). Lifted out of an intact flat sheet, a crease cannot reach its
+    memory length without stretching the paper around it (an isolated crease is not
+    developable); held to it, the crumpled sheet rested at 79 % strain."""
     touches = np.zeros(sheet.vertex_count, dtype=bool)
     touches[moved] = True
     ends = sheet.spring_vertices
     kind = sheet.spring_kind
-    springs = np.arange(kind.size)
-    shaped = (kind == HINGE) & (
-        touches[ends[:, 0]] | touches[ends[:, 1]] | (springs >= first_new_spring)
-        | np.isin(springs, folded))
+    shaped = (kind == HINGE) & (touches[ends[:, 0]] | touches[ends[:, 1]]
+                                | (np.arange(kind.size) >= first_new_spring))
     sheet.spring_rest_length[shaped] = spring_lengths(sheet.positions, ends[shaped])

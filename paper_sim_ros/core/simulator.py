@@ -375,20 +375,18 @@ class Simulator:
         ends = sheet.spring_vertices[springs]
         length = spring_lengths(sheet.positions, ends)
         rest = sheet.spring_rest_length[springs]
-        new_rest = np.minimum(np.clip(rest, length / (1.0 + solver.max_stretch),
-                                      length / (1.0 - solver.max_compression)),
-                              np.maximum(self._memory_longest, rest))
         # the paper at its ends: the largest |HINGE strain| there
         vertex_strain = kernels.vertex_max_abs_strain(sheet.positions, sheet.spring_vertices,
                                                       sheet.spring_rest_length,
                                                       sheet.spring_kind, HINGE)
         end_strain = np.maximum(vertex_strain[ends[:, 0]], vertex_strain[ends[:, 1]])
         followed = MEMORY_STRAIN_BANDS * max(solver.max_stretch, solver.max_compression)
-        # where the paper at its ends is held beyond that, the memory gives all of its pull
-        strained = end_strain > followed
-        new_rest = np.where(strained,
-                            np.minimum(length, np.maximum(self._memory_longest, rest)),
-                            new_rest)
+        # within the band of its length; all of its pull given where the paper at its ends
+        # is held beyond that
+        new_rest = np.where(end_strain > followed, length,
+                            np.clip(rest, length / (1.0 + solver.max_stretch),
+                                    length / (1.0 - solver.max_compression)))
+        new_rest = np.minimum(new_rest, np.maximum(self._memory_longest, rest))
         target = self._memory_target[springs]
         pending = np.isfinite(target)
         if pending.any():
