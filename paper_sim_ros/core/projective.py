@@ -89,20 +89,41 @@ def _solve_factored(pointer, index, value, diagonal, permutation, coupling_point
         work[column, 0] *= scale
         work[column, 1] *= scale
         work[column, 2] *= scale
-    for step in range(count):  # Lᵀ w = y
+    # Lᵀ w = y. The factor is read from its end to its start, entry by entry: read
+    # backwards column by column but forwards within each, the prefetcher lost the stream
+    # (129² bending: 4.2 against 2.3 ms). Two partial sums halve the chain of dependent
+    # additions.
+    for step in range(count):
         column = count - 1 - step
         w0 = work[column, 0]
         w1 = work[column, 1]
         w2 = work[column, 2]
-        for p in range(pointer[column], pointer[column + 1]):
+        u0 = 0.0
+        u1 = 0.0
+        u2 = 0.0
+        start = pointer[column]
+        p = pointer[column + 1] - 1
+        while p > start:
             row = index[p]
             entry = value[p]
             w0 -= entry * work[row, 0]
             w1 -= entry * work[row, 1]
             w2 -= entry * work[row, 2]
-        work[column, 0] = w0
-        work[column, 1] = w1
-        work[column, 2] = w2
+            row = index[p - 1]
+            entry = value[p - 1]
+            u0 += entry * work[row, 0]
+            u1 += entry * work[row, 1]
+            u2 += entry * work[row, 2]
+            p -= 2
+        if p == start:
+            row = index[p]
+            entry = value[p]
+            w0 -= entry * work[row, 0]
+            w1 -= entry * work[row, 1]
+            w2 -= entry * work[row, 2]
+        work[column, 0] = w0 - u0
+        work[column, 1] = w1 - u1
+        work[column, 2] = w2 - u2
     for k in range(count):  # x = Pᵀ w
         source = permutation[k]
         v = free[k]
