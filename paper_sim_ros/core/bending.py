@@ -35,7 +35,7 @@ import numpy as np
 from numba import njit
 
 from . import patches
-from .topology import edge_key, keys_in, sorted_keys_in
+from .topology import edge_key, find_sorted
 
 FLAT_REST = 1e-9
 """Hinges whose rest |κ0| is below this [rad] rest flat: their target is zero and skipped
@@ -66,9 +66,8 @@ def hinge_quads(triangles: np.ndarray, vertex_count: int) -> np.ndarray:
     if order.size == 0:
         return np.zeros((0, 4), dtype=np.int32)
     # the other triangle of an interior edge runs it j -> i, with l across
-    position = np.minimum(np.searchsorted(backward_key[order], forward_key), order.size - 1)
+    position, paired = find_sorted(forward_key, backward_key[order])
     match = order[position]
-    paired = backward_key[match] == forward_key
     return np.column_stack([start[forward][paired], end[forward][paired],
                             across[forward][paired],
                             across[~forward][match[paired]]]).astype(np.int32)
@@ -285,8 +284,9 @@ class SheetBending:
         vertex_count = positions.shape[0]
         self.quads = hinge_quads(triangles, vertex_count)
         count = self.quads.shape[0]
-        self.folded = keys_in(edge_key(self.quads[:, 2], self.quads[:, 3], vertex_count),
-                              edge_key(fold_pairs[:, 0], fold_pairs[:, 1], vertex_count))
+        self.folded = find_sorted(
+            edge_key(self.quads[:, 2], self.quads[:, 3], vertex_count),
+            np.sort(edge_key(fold_pairs[:, 0], fold_pairs[:, 1], vertex_count)))[1]
         self.weights = np.empty((count, 4))
         self.stiffness = np.empty(count)
         self.rest_curvature = np.empty((count, 3))
@@ -347,7 +347,7 @@ class SheetBending:
         covered_keys = np.sort(patches.triangle_keys(corners, vertex_count)[
             np.all(has_vertex_patch[corners], axis=1)])
         keys = patches.triangle_keys(triangles, vertex_count)
-        covered = sorted_keys_in(keys, covered_keys)
+        covered = find_sorted(keys, covered_keys)[1]
         corner_area = patches.voronoi_areas(self._material, triangles[covered])
         vertex_area = np.bincount(triangles[covered].ravel(), weights=corner_area.ravel(),
                                   minlength=vertex_count)
@@ -360,20 +360,19 @@ class SheetBending:
         cell_area = np.zeros(one.shape[0])
         for half in (one, other):
             key = patches.triangle_keys(half, vertex_count)
-            at = np.minimum(np.searchsorted(sorted_keys, key), max(sorted_keys.size - 1, 0))
+            at, found = find_sorted(key, sorted_keys)
             if sorted_keys.size:
-                cell_area += np.where(sorted_keys[at] == key, sorted_area[at], 0.0)
+                cell_area += np.where(found, sorted_area[at], 0.0)
         area[self.is_cell] = cell_area
         self.patch_weight = self._rigidity * area
         self._patches = np.flatnonzero(self.patch_weight > 0.0)
         curvature = np.abs(self.patch_rest[self._patches]).reshape(
             self._patches.size, patches.ROWS * 3).max(axis=1, initial=0.0)
         self._curved_patches = self._patches[curvature > patches.FLAT_REST]
-        uncovered = (~sorted_keys_in(
-            patches.triangle_keys(self.quads[:, [0, 1, 2]], vertex_count),
-            covered_keys)).astype(int) \
-            + (~sorted_keys_in(patches.triangle_keys(self.quads[:, [1, 0, 3]], vertex_count),
-                               covered_keys)).astype(int)
+        uncovered = sum((~find_sorted(patches.triangle_keys(self.quads[:, half],
+                                                            vertex_count),
+                                      covered_keys)[1]).astype(int)
+                        for half in ([0, 1, 2], [1, 0, 3]))
         self.hinge_share = 0.5 * uncovered
         self._hinge_stiffness = self.stiffness * self.hinge_share
         self._curved = np.flatnonzero(
@@ -387,10 +386,9 @@ class SheetBending:
         old_key = edge_key(previous.quads[:, 0], previous.quads[:, 1], vertex_count)
         new_key = edge_key(self.quads[:, 0], self.quads[:, 1], vertex_count)
         order = np.argsort(old_key)
-        position = np.minimum(np.searchsorted(old_key[order], new_key), order.size - 1)
+        position, same = find_sorted(new_key, old_key[order])
         match = order[position]
-        same = (old_key[match] == new_key) \
-            & np.all(previous.quads[match, 2:] == self.quads[:, 2:], axis=1) \
+        same &= np.all(previous.quads[match, 2:] == self.quads[:, 2:], axis=1) \
             & (previous.folded[match] == self.folded)
         for name in ('weights', 'stiffness', 'rest_curvature'):
             getattr(self, name)[same] = getattr(previous, name)[match[same]]

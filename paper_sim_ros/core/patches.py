@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .topology import edge_key, mesh_edges, sorted_keys_in
+from .topology import edge_key, find_sorted, mesh_edges
 
 FLAT_REST = 1e-6
 """Patches whose rest second derivatives [1/m] are below this everywhere rest flat: their
@@ -158,13 +158,13 @@ def patches_standing(stencil: np.ndarray, is_cell: np.ndarray, triangles: np.nda
     edges = edge_key(edges[:, 0], edges[:, 1], vertex_count)  # sorted, unique
     centre = np.repeat(stencil[:, :1], PATCH_WIDTH - 1, axis=1)
     around = stencil[:, 1:]
-    edges_present = (sorted_keys_in(edge_key(centre, np.maximum(around, 0), vertex_count),
-                                    edges)
+    edges_present = (find_sorted(edge_key(centre, np.maximum(around, 0), vertex_count),
+                                 edges)[1]
                      | (around < 0)).all(axis=1)
     keys = np.sort(triangle_keys(triangles, vertex_count))
     one, other = cell_triangles(np.maximum(stencil, 0))
-    cells_present = (sorted_keys_in(triangle_keys(one, vertex_count), keys)
-                     & sorted_keys_in(triangle_keys(other, vertex_count), keys))
+    cells_present = (find_sorted(triangle_keys(one, vertex_count), keys)[1]
+                     & find_sorted(triangle_keys(other, vertex_count), keys)[1])
     return np.where(is_cell, cells_present, edges_present)
 
 
