@@ -2,7 +2,10 @@
 
     python -m paper_sim_ros.demo [--duration 20] [--out out] [--grid 33]
 
-Both nodes run in this process (one executor). An A4 sheet, clamped at one short edge
+Both nodes run in this process, each on its own executor and thread, as if they were two
+processes: the probe publishes its poses at its own rate also while the simulation steps a
+tick (on one executor it published once a tick, and the poses came too seldom for the node
+to place the probe evenly between them). An A4 sheet, clamped at one short edge
 0.2 m above a table, swings down, hangs and drapes onto the table; then the scripted probe
 pushes into its hanging part and drags across it, again and again. The node publishes
 paper/markers, paper/points and /diagnostics as usual (watch them with RViz and
@@ -17,6 +20,7 @@ import argparse
 import os
 from pathlib import Path
 import sys
+import threading
 import time
 
 from ament_index_python.packages import get_package_share_directory
@@ -67,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     recording = '' if arguments.no_record else str(out / 'demo.rrd')
     rclpy.init(args=['--ros-args', '--params-file', str(default_params_file())])
     executor = SingleThreadedExecutor()
+    probe_executor = SingleThreadedExecutor()
+    probe_thread = threading.Thread(target=_spin, args=(probe_executor,), daemon=True)
     nodes = []
     started = time.monotonic()
     interrupted = False
@@ -81,14 +87,15 @@ def main(argv: list[str] | None = None) -> int:
             Parameter('rerun_path', value=recording),
         ])
         nodes.append(simulation)
+        executor.add_node(simulation)
         probe = ScriptedProbe()
         nodes.append(probe)
-        for node in nodes:
-            executor.add_node(node)
+        probe_executor.add_node(probe)
         print(f'paper_sim demo: {arguments.duration:g} s, grid {arguments.grid}, ROS domain '
               f'{os.environ.get("ROS_DOMAIN_ID", "0")}; topics /paper/markers /paper/points '
               f'/paper/camera/... /diagnostics', flush=True)
         started = time.monotonic()
+        probe_thread.start()
         end = started + arguments.duration
         while time.monotonic() < end and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)
@@ -99,8 +106,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         summary = _summary(nodes[0], time.monotonic() - started) if nodes else None
+        probe_executor.shutdown()
+        if probe_thread.is_alive():
+            probe_thread.join(timeout=5.0)
         for node in reversed(nodes):
-            executor.remove_node(node)
             node.destroy_node()
         executor.shutdown()
         rclpy.try_shutdown()
@@ -110,6 +119,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f'Rerun recording: {recording} ({size / 1e6:.1f} MB); replay with: '
               f'rerun {recording}')
     return 0
+
+
+def _spin(executor: SingleThreadedExecutor) -> None:
+    """The probe's executor, until it is shut down."""
+    try:
+        executor.spin()
+    except (ExternalShutdownException, KeyboardInterrupt):
+        pass
 
 
 def _summary(simulation: PaperSimNode, wall_seconds: float) -> str:

@@ -15,8 +15,8 @@ Stamps. Every header carries ``frame_id`` and the time of the state it shows: th
 at which the simulation started (or was reset) plus the simulated time.
 
 Probes. One ``geometry_msgs/PoseStamped`` topic per probe (``probe_topics``); only the latest
-pose of each is kept (queue depth 1), so a flood of poses costs a callback each and nothing
-else. Poses in another frame, with NaN / inf, or absurdly far away are refused with a
+poses of each are kept (queue depth POSE_HISTORY), so a flood of poses costs a few callbacks a
+tick and nothing else. Poses in another frame, with NaN / inf, or absurdly far away are refused with a
 throttled warning naming the reason, and counted.
 """
 from __future__ import annotations
@@ -54,7 +54,7 @@ from .msg_adapters.diagnostics import diagnostic_array, diagnostic_status
 from .msg_adapters.markers import MarkerStyle, sheet_markers_cdr
 from .msg_adapters.point_cloud import create_cloud, dense_surface_points, sheet_points
 from .node_runner import run_node
-from .pose_track import PoseTrack
+from .pose_track import POSE_HISTORY, PoseTrack
 from .node_parameters import (PARAMETER_SPECS, NodeSettings, declared_defaults,
                               parameter_table, settings_from_values)
 from .rerun_logger import RerunRecorder
@@ -65,10 +65,13 @@ OUTPUT_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE)
 """Reliable, latest only: RViz subscribes reliable by default; best-effort readers connect."""
-POSE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+POSE_QOS = QoSProfile(depth=POSE_HISTORY, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
-"""Depth 1: under a flood only the latest pose waits for the executor (the track places
-each pose it gets by its stamp, and extrapolates over a missed one)."""
+"""As deep as the track: the poses that came while a tick ran (one tick behind the clock
+at 65² takes 0.1-0.2 s) reach the track, which places each by its stamp. With depth 1 only
+the last of them did, the track's poses lay too far apart to extrapolate from, and the probe
+stood still for the last frames of every tick, then went on at once (the demo, 65²: 13-15 %
+strain). Under a flood the same few poses wait, never more."""
 WARN_EVERY = 2.0
 """Seconds between two warnings of one kind (refused poses, failed ticks)."""
 
@@ -412,7 +415,9 @@ class PaperSimNode(Node):
         radii = np.asarray(self._settings.probe_radii, dtype=np.float64)
         stats = self._stats
         tick_end_ns = self._origin_ns + (simulator.frame + due) * dt_ns
-        for probe in self._probes:
+        for probe, is_active in zip(self._probes, active):
+            if not is_active:
+                probe.track.forget_placement()  # when it returns, it comes from away
             if probe.unstamped is not None:
                 # it moved there over this tick, from where it stood at the last frame
                 newest = probe.track.newest_stamp
@@ -423,11 +428,12 @@ class PaperSimNode(Node):
         for frame in range(due):
             # each probe where its poses put it at the end of this frame, not at its latest
             # pose: poses arrive in bursts (pose_track.py); a tick behind the clock steps
-            # the path it lost in fewer, longer strides rather than one jump
+            # the path it lost in fewer, longer strides rather than one jump, and closes
+            # any gap to poses that came after its frames over a few frames (place)
             frame_end_ns = int(round(last_end_ns + (frame + 1) / due
                                      * (tick_end_ns - last_end_ns)))
             for index in np.flatnonzero(active):
-                centers[index] = self._probes[index].track.at(frame_end_ns)
+                centers[index] = self._probes[index].track.place(frame_end_ns, dt)
             self._set_probes(centers, radii, active)
             started = time.perf_counter()
             simulator.step_frame()
@@ -554,6 +560,8 @@ class PaperSimNode(Node):
         self.simulator.reset()
         self._apply_pins()
         self._origin_ns = None
+        for probe in self._probes:
+            probe.track.forget_placement()
         self._points_schedule = Schedule(dropped=self._points_schedule.dropped)
         self._markers_schedule = Schedule(dropped=self._markers_schedule.dropped)
         self._delete_all_pending = True

@@ -48,3 +48,35 @@ def test_past_the_newest_it_extrapolates_a_little_and_only_from_close_poses():
 def test_a_pose_stamped_earlier_than_the_newest_starts_afresh():
     track = track_of((100, 5.0), (110, 6.0), (50, -1.0))
     assert len(track) == 1 and track.at(200 * MS)[0] == -1.0
+
+
+def test_a_probe_placed_past_its_poses_closes_the_gap_over_frames_not_in_one():
+    """A node behind the clock steps frames past its newest pose (too old to extrapolate
+    from: the probe is held), then poses come that put the probe further along. Placed,
+    the probe goes on from where it was held and closes the gap over a few frames; read
+    from the track alone it would jump the whole gap in one frame."""
+    frame_ns, frame_seconds = int(1e9 / 60), 1 / 60
+    speed = 0.2  # m/s
+    track = track_of((0, 0.0), (150, speed * 0.150))
+    placed = [track.place(k * frame_ns, frame_seconds)[0] for k in range(9, 18)]  # held
+    assert placed[-1] == pytest.approx(speed * 0.150)
+    for stamp_ms in (200, 250, 300, 350, 400):  # the poses the tick could not read
+        track.add(stamp_ms * MS, np.array([speed * stamp_ms / 1e3, 0.0, 0.0]))
+    read_jump = track.at(18 * frame_ns)[0] - placed[-1]
+    placed += [track.place(k * frame_ns, frame_seconds)[0] for k in range(18, 48)]
+    strides = np.diff(placed[8:])
+    assert read_jump > 0.015
+    assert strides.max() < speed * frame_seconds + read_jump / 4, \
+        f'a stride of {1e3 * strides.max():.1f} mm against a gap of {1e3 * read_jump:.1f} mm'
+    assert np.all(strides > 0.0), 'the probe went back'
+    # half a second on it is where its poses put it (to half a millimetre)
+    assert placed[-1] == pytest.approx(track.at(47 * frame_ns)[0], abs=5e-4)
+
+
+def test_a_placement_forgotten_starts_where_the_poses_are():
+    track = track_of((0, 0.0), (10, 0.0))
+    assert track.place(30 * MS, 1 / 60)[0] == 0.0  # past the newest pose, held
+    track.add(35 * MS, np.array([0.5, 0.0, 0.0]))  # it was at 0.4 then
+    assert track.place(50 * MS, 1 / 60)[0] < track.at(50 * MS)[0] - 0.3  # catching up
+    track.forget_placement()
+    assert track.place(60 * MS, 1 / 60)[0] == track.at(60 * MS)[0]
