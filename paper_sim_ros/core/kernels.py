@@ -504,6 +504,29 @@ def inside_probes(positions, probe_center, probe_radius, probe_active, ground_he
                                  ground_height, ground_enabled) > tolerance
 
 
+@njit(cache=True)
+def contact_rows_hold(positions, probe_center, probe_radius, probe_active, ground_height,
+                      ground_enabled, tolerance, pinned, row_vertex, row_is_contact,
+                      multipliers):
+    """Whether a solve's probe rows stand as they are: every contact row pushes (λ ≤ 0)
+    and no free vertex without a row sits deeper than ``tolerance`` [m] inside an active
+    probe (Simulator._settle_contact_rows, which changes the rows otherwise). One pass and
+    no allocation but a mark per vertex: most iterations leave the rows alone."""
+    for r in range(row_vertex.shape[0]):
+        if row_is_contact[r] and not multipliers[r] <= 0.0:
+            return False
+    has_row = np.zeros(positions.shape[0], dtype=np.bool_)
+    for r in range(row_vertex.shape[0]):
+        has_row[row_vertex[r]] = True
+    for v in range(positions.shape[0]):
+        if pinned[v] or has_row[v]:
+            continue
+        if _probe_depth(positions, v, probe_center, probe_radius, probe_active,
+                        ground_height, ground_enabled) > tolerance:
+            return False
+    return True
+
+
 @njit(cache=True, inline='always')
 def _probe_depth(positions, v, probe_center, probe_radius, probe_active, ground_height,
                  ground_enabled):

@@ -115,6 +115,8 @@ class Simulator:
         self._global_step = self._bending_step = None  # factored anew
         self._probe_from = self._probe_to = np.zeros((0, 3))
         """Where the probes are at the start and the end of the current sub-step."""
+        self._free_probes = np.zeros(0, dtype=bool)
+        """The probes whose contacts are rows of the current sub-step's solves."""
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
             self.config.damage, self.config.seed, self.config.sheet.aux_stiffness,
@@ -702,6 +704,13 @@ class Simulator:
         if not self.probes.count:
             return False
         vertex, direction, value = self._rows
+        contact = self.config.contact
+        if kernels.contact_rows_hold(positions, self._probe_to, self.probes.radius,
+                                     self._free_probes, contact.ground_height,
+                                     contact.ground_enabled, CONTACT_TOLERANCE,
+                                     self.sheet.pinned, vertex,
+                                     self._row_kind == CONTACT_ROW, multipliers):
+            return False
         keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
         inside = self._inside_probes(positions)
         inside[vertex] = False
@@ -728,6 +737,14 @@ class Simulator:
         if not self.probes.count:  # nothing to hold (nor gripped: grips need a probe)
             self._rows, self._row_kind = NO_ROWS, NO_ROWS[0]
             return
+        # the probes that hold what they reach in this sub-step's solves (_inside_probes):
+        # a probe pressed into the table pinches what it reaches there (_grip), and the
+        # stretch pass lets the sheet ahead of it buckle (docs/contact.md); a probe rising
+        # lets go of what rode up its front: neither holds more rows
+        table = self.config.contact
+        self._free_probes = self.probes.active & ~(
+            table.ground_enabled & (probe_to[:, 2] - self.probes.radius < table.ground_height)) \
+            & (probe_to[:, 2] <= probe_from[:, 2])
         gripped = np.flatnonzero(self._grip_probe >= 0)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
         self._contact(positions, start_positions, probe_from, probe_to, True, touched,
@@ -751,13 +768,7 @@ class Simulator:
         that does not press into the table, at the end of the sub-step."""
         inside = np.zeros(positions.shape[0], dtype=bool)
         contact = self.config.contact
-        # a probe pressed into the table pinches what it reaches there (_grip), and the
-        # stretch pass lets the sheet ahead of it buckle (docs/contact.md); a probe rising
-        # lets go of what rode up its front: neither holds more rows
-        free_probes = self.probes.active & ~(
-            contact.ground_enabled
-            & (self._probe_to[:, 2] - self.probes.radius < contact.ground_height)) \
-            & (self._probe_to[:, 2] <= self._probe_from[:, 2])
+        free_probes = self._free_probes
         if np.any(free_probes):
             kernels.inside_probes(positions, self._probe_to, self.probes.radius,
                                   free_probes, contact.ground_height,
