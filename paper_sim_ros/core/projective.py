@@ -492,9 +492,10 @@ class ConstrainedSolve:
         return int(np.count_nonzero(self._column_of[vertices] < 0))
 
     def _ensure_columns(self, vertices: np.ndarray) -> None:
-        missing = np.unique(vertices[self._column_of[vertices] < 0])
-        if missing.size == 0:
+        absent = self._column_of[vertices] < 0
+        if not absent.any():  # the rule in a sub-step's iterations
             return
+        missing = np.unique(vertices[absent])
         vertex_count = self._column_of.size
         if (self._column_count + missing.size) * vertex_count > KEPT_COLUMN_ENTRIES:
             # a sheet that has touched much in its time: start again from what is held now
