@@ -47,7 +47,8 @@ class PoseTrack:
     def __init__(self) -> None:
         self._stamps: deque[int] = deque(maxlen=POSE_HISTORY)
         self._positions: deque[np.ndarray] = deque(maxlen=POSE_HISTORY)
-        self._placed: tuple[int, np.ndarray] | None = None
+        self._placed: tuple[int, np.ndarray, np.ndarray] | None = None
+        """The last placement: time, position, and its difference from the track then."""
 
     def __len__(self) -> int:
         return len(self._stamps)
@@ -93,12 +94,24 @@ class PoseTrack:
         """Where the simulation puts the probe at ``time_ns``, ``simulated_seconds`` after
         its last placement: ``at(time_ns)``, plus what is left of the difference between
         the last placement and where the track now puts the probe at that time (1 less
-        ``simulated_seconds / CATCH_UP_SECONDS`` of it). The track must not be empty."""
-        position = self.at(time_ns)
-        if self._placed is not None:
-            placed_ns, placed_position = self._placed
-            left = max(0.0, 1.0 - simulated_seconds / CATCH_UP_SECONDS)
-            if left > 0.0:
-                position = position + left * (placed_position - self.at(placed_ns))
-        self._placed = (int(time_ns), position)
+        ``simulated_seconds / CATCH_UP_SECONDS`` of it). Where the track no longer reaches
+        back to the last placement (a flood of poses outran POSE_HISTORY within a tick),
+        the probe goes evenly from there to the oldest pose. The track must not be
+        empty."""
+        stamps = self._stamps
+        offset = np.zeros(3)
+        if self._placed is None:
+            position = self.at(time_ns)
+        else:
+            placed_ns, placed_position, offset = self._placed
+            if placed_ns >= stamps[0]:
+                offset = placed_position - self.at(placed_ns)
+            elif time_ns < stamps[0]:
+                share = (time_ns - placed_ns) / (stamps[0] - placed_ns)
+                position = placed_position + share * (self._positions[0] - placed_position)
+                self._placed = (int(time_ns), position, np.zeros(3))
+                return position.copy()
+            offset = max(0.0, 1.0 - simulated_seconds / CATCH_UP_SECONDS) * offset
+            position = self.at(time_ns) + offset
+        self._placed = (int(time_ns), position, offset)
         return position.copy()

@@ -80,3 +80,19 @@ def test_a_placement_forgotten_starts_where_the_poses_are():
     assert track.place(50 * MS, 1 / 60)[0] < track.at(50 * MS)[0] - 0.3  # catching up
     track.forget_placement()
     assert track.place(60 * MS, 1 / 60)[0] == track.at(60 * MS)[0]
+
+
+def test_a_flood_of_poses_shorter_than_a_tick_still_places_an_even_path():
+    """Poses every millisecond, a tick every 4 frames: the track keeps the last 32 poses,
+    less than a tick, so a tick's first frames are older than its oldest pose. The probe,
+    at an even 0.1 m/s, still moves 1/600 m a frame from the first tick's last frame on
+    (before it, nothing was placed: the first frames hold the oldest pose)."""
+    track = PoseTrack()
+    frame_ns = int(1e9 / 60)
+    placed = []
+    for tick in range(6):
+        for stamp_ms in range(tick * 67, (tick + 1) * 67):
+            track.add(stamp_ms * MS, np.array([0.1 * stamp_ms / 1e3, 0.0, 0.0]))
+        for frame in range(4 * tick + 1, 4 * tick + 5):
+            placed.append(track.place(frame * frame_ns, 1 / 60)[0])
+    np.testing.assert_allclose(np.diff(placed[3:]), 0.1 / 60, atol=2e-5)
