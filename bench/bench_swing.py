@@ -3,7 +3,7 @@ flat, swings down; how far its lowest point is below the start at 0.17 s and at 
 per grid and sub-step count.
 
     .venv/bin/python bench/bench_swing.py [--grids 33 65 129] [--substeps 1 4 16]
-        [--set solver.projective_iterations=30 sheet.bending_rigidity=4e-5 ...]
+        [--set solver.energy_restoring=true sheet.bending_rigidity=4e-5 ...]
 
 Defaults otherwise (air drag 0.2/s, no table, no damage), or what ``--set`` changes (what
 docs/solver.md's search for the damping one sub-step adds changed). The answer with many sub-steps
@@ -50,7 +50,7 @@ def main() -> None:
     parser.add_argument('--grids', type=int, nargs='+', default=[33, 65, 129])
     parser.add_argument('--substeps', type=int, nargs='+', default=[1, 4, 16])
     parser.add_argument('--set', nargs='+', default=[], metavar='SECTION.NAME=VALUE',
-                        help='solver.* or sheet.* values (numbers) for the scene')
+                        help='solver.* or sheet.* values (numbers, true, false) for the scene')
     args = parser.parse_args()
     overrides: dict[str, dict[str, float]] = {}
     for assignment in args.set:
@@ -58,9 +58,12 @@ def main() -> None:
         section, _, name = key.partition('.')
         if section not in ('solver', 'sheet') or not name or not value:
             parser.error(f'--set wants solver.NAME=VALUE or sheet.NAME=VALUE, got {assignment!r}')
+        if value in ('true', 'false'):
+            overrides.setdefault(section, {})[name] = value == 'true'
+            continue
         number = float(value)
         overrides.setdefault(section, {})[name] = int(number) if number.is_integer() \
-            and name.endswith('iterations') else number
+            and (name.endswith('iterations') or name == 'substeps') else number
     print('| grid | sub-steps | ' + ' | '.join(f'lowest at {t}' for t in SAMPLES.values())
           + ' | seconds |')
     print('|---|---|' + '---|' * len(SAMPLES) + '---|')

@@ -1,12 +1,13 @@
 """Contact over scenarios, grids and seeds: what issue 13 asks of every built-in scenario.
 
     .venv/bin/python bench/contact_sweep.py [--scenarios press drag ...] [--grids 33 65]
-        [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4]
+        [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4] [--energy-restoring]
 
 Per run: max HINGE strain over the run, deepest vertex inside a probe and below the table
 (beyond a pressed probe's dimple), breaks, folds, relaxed deviation, mesh validity, mass
 error, the share of the fingertip's travel the sheet's centroid followed (probe scenarios)
-and the real-time factor (single thread; timings are noisy when runs share the cores).
+the real-time factor (single thread; timings are noisy when runs share the cores) and the
+99th-percentile vertex speed at the end.
 Then the worst over seeds per scenario and grid. A script, not a test.
 """
 from __future__ import annotations
@@ -24,12 +25,17 @@ import numpy as np  # noqa: E402
 
 from paper_sim_ros.core import load_scenario, run_scenario  # noqa: E402
 from paper_sim_ros.core.runner import build_simulator  # noqa: E402
-from paper_sim_ros.core.scenarios import BUILTIN_SCENARIOS  # noqa: E402
+from paper_sim_ros.core.scenarios import (BUILTIN_SCENARIOS, builtin_mapping,  # noqa: E402
+                                          with_overrides)
 
 
-def measure(name: str, grid: int, seed: int, damage: bool, substeps: int | None) -> dict:
-    scenario = load_scenario(name, grid=grid, seed=seed, damage_enabled=damage,
-                             substeps=substeps)
+def measure(name: str, grid: int, seed: int, damage: bool, substeps: int | None,
+            energy_restoring: bool = False) -> dict:
+    mapping = with_overrides(builtin_mapping(name), grid=grid, seed=seed,
+                             damage_enabled=damage, substeps=substeps)
+    if energy_restoring:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'energy_restoring': True}
+    scenario = load_scenario(mapping)
     simulator = build_simulator(scenario)
     mass = simulator.sheet.vertex_mass
 
@@ -60,7 +66,8 @@ def row(metrics: dict) -> str:
             f"{1e3 * metrics['max_table_penetration_m']:6.2f} mm  breaks {metrics['breaks']:>4}"
             f"  folds {metrics['folds']:>4}  relaxed {1e3 * metrics['relaxed_deviation_m']:6.2f}"
             f" mm  follow {metrics['follow']:5.2f}  valid {metrics['mesh_valid']!s:>5}  "
-            f"mass err {metrics['mass_error']:.1e}  RTF {metrics['realtime_factor']:5.2f}")
+            f"mass err {metrics['mass_error']:.1e}  RTF {metrics['realtime_factor']:5.2f}  "
+            f"final p99 speed {1e3 * metrics['final_p99_speed_mps']:.3f} mm/s")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -72,9 +79,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--no-damage', action='store_true')
     parser.add_argument('--substeps', type=int, default=None,
                         help="sub-steps per frame (default: each scenario's own)")
+    parser.add_argument('--energy-restoring', action='store_true',
+                        help='solver.energy_restoring on (docs/solver.md)')
     args = parser.parse_args(argv)
-    runs = [(name, grid, seed, not args.no_damage, args.substeps) for name in args.scenarios
-            for grid in args.grids for seed in args.seeds]
+    runs = [(name, grid, seed, not args.no_damage, args.substeps, args.energy_restoring)
+            for name in args.scenarios for grid in args.grids for seed in args.seeds]
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
         for metrics in pool.map(measure, *zip(*runs)):

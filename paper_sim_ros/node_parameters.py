@@ -149,6 +149,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver.global_stiffness', _SOLVER.global_stiffness,
                   "Weight of the held springs in the global step [N/m] ('constrained'; a "
                   'solver weight, not the material stiffness).', (1.0e-3, 1.0e9)),
+    ParameterSpec('solver.energy_restoring', _SOLVER.energy_restoring,
+                  "After a frame of free motion (no probe, off the table, nothing yielded "
+                  "or broke), give back the energy the step lost beyond air drag "
+                  "('constrained'; one sub-step then swings as many do)."),
     ParameterSpec('contact.ground_enabled', True, 'A table (ground plane) under the sheet.'),
     ParameterSpec('contact.ground_height', 0.0, 'Height of the table [m].', (-100.0, 100.0)),
     ParameterSpec('contact.ground_friction', _CONTACT.ground_friction,

@@ -114,6 +114,13 @@ class SolverConfig:
     """Linear air drag rate [1/s], mass proportional."""
     gravity: tuple = (0.0, 0.0, -9.81)
     """Gravity [m/s²]."""
+    energy_restoring: bool = False
+    """('constrained') After a frame in which nothing but gravity, air and the pins acted
+    and nothing yielded or broke, give back the energy the step lost beyond air drag by
+    scaling the velocities (without changing a free sheet's momenta): one implicit step
+    projected back to the edge lengths loses about (vh/L)²/3 of a swinging sheet's speed a
+    frame. On, one sub-step swings as 128 do; off by default because a sheet that keeps its
+    swing is strained more by what then touches it (docs/solver.md)."""
 
     def __post_init__(self) -> None:
         _require(self.method in SOLVERS, f'method must be one of {SOLVERS}, got {self.method!r}')
@@ -136,6 +143,8 @@ class SolverConfig:
         _finite_positive('global_stiffness', self.global_stiffness)
         _require(len(self.gravity) == 3 and all(math.isfinite(g) for g in self.gravity),
                  f'gravity must be three finite numbers, got {self.gravity!r}')
+        _require(isinstance(self.energy_restoring, bool),
+                 f'energy_restoring must be a bool, got {self.energy_restoring!r}')
 
 
 @dataclass(frozen=True)

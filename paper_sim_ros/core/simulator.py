@@ -55,6 +55,11 @@ TABLE_NORMAL = np.array([0.0, 0.0, 1.0])
 BUCKLING_PROGRESS = 0.05
 """The share of the springs' compression beyond ``buckling_compression`` an extra
 local/global iteration must take out for the next one to run (docs/solver.md)."""
+RESTORE_MOST = 1.1
+"""``solver.energy_restoring`` scales the velocities by at most this a frame (21 % more
+kinetic energy): what an energy estimate gets wrong cannot launch the sheet."""
+RESTORE_FLOOR = 1e-12
+"""Kinetic energy [J] below which there is no motion to scale (a sheet at rest)."""
 FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
 GRIP_ROW, CONTACT_ROW = 0, 1
@@ -287,6 +292,12 @@ class Simulator:
         substeps = solver.substeps
         h = solver.dt / substeps
         saved_positions = self.sheet.positions.copy()
+        restoring = (solver.energy_restoring and solver.method == 'constrained'
+                     and self._bending is not None and not np.any(self.probes.active))
+        if restoring:
+            energy_before = self.energy()
+            kinetic_before = self._kinetic_energy()
+            changes_before = (self.breaks, self.folds, len(self.damage.creases))
         # sub-steps, the probes sweeping a share of their frame's path in each
         probe_path = self.probes.end - self.probes.start
         for sub in range(substeps):
@@ -301,10 +312,11 @@ class Simulator:
             self.sheet.velocities[:] = 0.0
         # damage: checked at its own rate in simulated time, never per sub-step
         damage = self.config.damage
+        yielded = 0
         if (damage.enabled and damage.yield_curvature > 0 and solver.method == 'constrained'
                 and self._bending is not None):
-            self._bending.yield_to(self.sheet.positions, damage.yield_curvature,
-                                   YIELD_BATCH_FRAMES)
+            yielded = self._bending.yield_to(self.sheet.positions, damage.yield_curvature,
+                                             YIELD_BATCH_FRAMES)
         if solver.method == 'constrained':
             self._yield_memory()
         creases_before = len(self.damage.creases)
@@ -318,9 +330,56 @@ class Simulator:
                                                  or self._bending.matrix_changed):
             # patches gave way to hinges: the springs are as they were
             self._factor_global_steps(springs=False)
+        if restoring and not (yielded or self._bending.matrix_changed or self.nan_seen
+                              or (self.breaks, self.folds, len(self.damage.creases))
+                              != changes_before):
+            self._restore_energy(energy_before - 2.0 * solver.air_damping * solver.dt
+                                 * kinetic_before)
         self.probes.start = self.probes.end.copy()
         self.time += solver.dt
         self.frame += 1
+
+    def _kinetic_energy(self) -> float:
+        sheet = self.sheet
+        return float(0.5 * np.sum(sheet.vertex_mass * np.sum(sheet.velocities ** 2, axis=1)))
+
+    def _restore_energy(self, target: float) -> None:
+        """``solver.energy_restoring``: the velocities scaled so that the energy is
+        ``target`` [J] again (what the frame had less air drag's first-order loss), at most
+        by RESTORE_MOST a frame, and only where the frame lost energy and nothing touched
+        the table. A pinned sheet's velocities are scaled whole; a free one keeps its
+        momenta (only its velocities less the rigid motion are scaled, whose kinetic energy
+        adds to the rigid motion's). A simplified energy projection (FEPR, Dinev et al.
+        2018): the implicit step projects a turning sheet back to its edge lengths and
+        loses speed it should not (docs/solver.md, convergence of motion)."""
+        sheet = self.sheet
+        contact = self.config.contact
+        if contact.ground_enabled and \
+                sheet.positions[:, 2].min() <= contact.ground_height + TABLE_TOLERANCE:
+            return
+        lost = target - self.energy()
+        if not lost > 0.0:
+            return
+        mass, velocities = sheet.vertex_mass, sheet.velocities
+        scaled = velocities
+        if not np.any(sheet.pinned):
+            centre = (mass[:, None] * sheet.positions).sum(0) / mass.sum()
+            offset = sheet.positions - centre
+            drift = (mass[:, None] * velocities).sum(0) / mass.sum()
+            # I = Σ m (|r|² 1 − r rᵀ) about the centre; ω = I⁻¹ L (least squares: a line)
+            inertia = np.eye(3) * float(mass @ np.einsum('va,va->v', offset, offset)) \
+                - np.einsum('v,va,vb->ab', mass, offset, offset)
+            spin = np.linalg.lstsq(inertia, kernels.angular_momentum(
+                sheet.positions, velocities, mass), rcond=None)[0]
+            scaled = velocities - drift - np.cross(spin, offset)
+        kinetic = float(0.5 * np.sum(mass * np.sum(scaled ** 2, axis=1)))
+        if kinetic <= RESTORE_FLOOR:
+            return
+        scale = min(math.sqrt((kinetic + lost) / kinetic), RESTORE_MOST)
+        if scaled is velocities:
+            velocities *= scale
+        else:
+            velocities += (scale - 1.0) * scaled
 
     def _keep_creases_out(self, creases: list[tuple[int, int, int]]) -> None:
         """A break puts its new vertex m off the sheet, to the side the sheet bulges; where
