@@ -15,9 +15,9 @@ Stamps. Every header carries ``frame_id`` and the time of the state it shows: th
 at which the simulation started (or was reset) plus the simulated time.
 
 Probes. One ``geometry_msgs/PoseStamped`` topic per probe (``probe_topics``); only the latest
-poses of each are kept (queue depth POSE_HISTORY), so a flood of poses costs a few callbacks a
-tick and nothing else. Poses in another frame, with NaN / inf, or absurdly far away are refused with a
-throttled warning naming the reason, and counted.
+poses of each are kept (queue depth POSE_HISTORY), so a flood of poses costs a few callbacks
+a tick and nothing else. Poses in another frame, with NaN / inf, or absurdly far away are
+refused with a throttled warning naming the reason, and counted.
 """
 from __future__ import annotations
 

@@ -98,19 +98,18 @@ class PoseTrack:
         back to the last placement (a flood of poses outran POSE_HISTORY within a tick),
         the probe goes evenly from there to the oldest pose. The track must not be
         empty."""
-        stamps = self._stamps
+        oldest = self._stamps[0]
         offset = np.zeros(3)
         if self._placed is None:
             position = self.at(time_ns)
+        elif self._placed[0] < oldest and time_ns < oldest:
+            placed_ns, placed_position, _ = self._placed
+            share = (time_ns - placed_ns) / (oldest - placed_ns)
+            position = placed_position + share * (self._positions[0] - placed_position)
         else:
             placed_ns, placed_position, offset = self._placed
-            if placed_ns >= stamps[0]:
+            if placed_ns >= oldest:
                 offset = placed_position - self.at(placed_ns)
-            elif time_ns < stamps[0]:
-                share = (time_ns - placed_ns) / (stamps[0] - placed_ns)
-                position = placed_position + share * (self._positions[0] - placed_position)
-                self._placed = (int(time_ns), position, np.zeros(3))
-                return position.copy()
             offset = max(0.0, 1.0 - simulated_seconds / CATCH_UP_SECONDS) * offset
             position = self.at(time_ns) + offset
         self._placed = (int(time_ns), position, offset)

@@ -773,8 +773,6 @@ class Simulator:
         keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
         inside = self._inside_probes(positions)
         inside[vertex] = False
-        if np.all(keep) and not np.any(inside):
-            return False
         added = np.flatnonzero(inside)
         normal, surface = self._contact_planes(positions, added, self._probe_to)
         self._rows = (np.concatenate([vertex[keep], added]),
@@ -978,7 +976,7 @@ class Simulator:
         strain band stores nothing)."""
         sheet = self.sheet
         gravity = np.asarray(self.config.solver.gravity)
-        kinetic = 0.5 * np.sum(sheet.vertex_mass * np.sum(sheet.velocities ** 2, axis=1))
+        kinetic = self._kinetic_energy()
         potential = -np.sum(sheet.vertex_mass * (sheet.positions @ gravity))
         if self.config.solver.method == 'constrained':
             return float(kinetic + potential + self._bending.energy(sheet.positions))
