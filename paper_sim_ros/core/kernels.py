@@ -165,8 +165,10 @@ def project_springs(positions, inverse_mass, spring_vertices, rest_length, short
     """One Gauss–Seidel sweep of strain limiting (Provot): a spring longer than
     ``longest`` × l0 or shorter than ``shortest`` × l0 is moved back to that bound, the
     correction shared by inverse mass. ``reverse`` sweeps from the last spring, so that
-    alternating sweeps carry corrections both ways across the sheet."""
+    alternating sweeps carry corrections both ways across the sheet. Returns how many
+    springs it moved (none: the sweep left every position as it was)."""
     count = spring_vertices.shape[0]
+    moved = 0
     for n in range(count):
         s = count - 1 - n if reverse else n
         i = spring_vertices[s, 0]
@@ -201,13 +203,17 @@ def project_springs(positions, inverse_mass, spring_vertices, rest_length, short
         positions[j, 0] -= wj * scale * dx
         positions[j, 1] -= wj * scale * dy
         positions[j, 2] -= wj * scale * dz
+        moved += 1
+    return moved
 
 
 @njit(cache=True)
 def project_attachments(positions, attached_vertex, anchor_vertex, attachment_length):
     """Long-range attachments (Kim et al. 2012): a vertex may be no farther from its
     nearest pinned vertex than their distance on the flat sheet. One pass carries the
-    weight of the whole sheet to the pins, which local sweeps cannot do in few passes."""
+    weight of the whole sheet to the pins, which local sweeps cannot do in few passes.
+    Returns how many vertices it moved."""
+    moved = 0
     for a in range(attached_vertex.shape[0]):
         v = attached_vertex[a]
         p = anchor_vertex[a]
@@ -221,6 +227,8 @@ def project_attachments(positions, attached_vertex, anchor_vertex, attachment_le
             positions[v, 0] = positions[p, 0] + dx * scale
             positions[v, 1] = positions[p, 1] + dy * scale
             positions[v, 2] = positions[p, 2] + dz * scale
+            moved += 1
+    return moved
 
 
 @njit(cache=True)
@@ -231,7 +239,8 @@ def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center
     the sphere's own motion over the step. Marks the vertices it moved in ``touched``.
     Below ``pad_height`` (the table; -inf without one) the sphere is flattened like a
     fingertip pressed on the table: a vertex on the table under it is pinched there, not
-    pushed sideways out of the sphere."""
+    pushed sideways out of the sphere. Returns how many vertices it moved."""
+    moved = 0
     for v in range(positions.shape[0]):
         if inverse_mass[v] == 0.0:
             continue
@@ -253,6 +262,8 @@ def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center
             # contact; the vertex is pressed onto the table and pinched there
             depth = max(0.0, positions[v, 2] - pad_height)
             nx, ny, nz = 0.0, 0.0, -1.0
+        if depth > 0.0:
+            moved += 1
         positions[v, 0] += depth * nx
         positions[v, 1] += depth * ny
         positions[v, 2] += depth * nz
@@ -270,6 +281,8 @@ def _push_out_of_sphere(positions, start_positions, inverse_mass, center, center
                 positions[v, 0] -= (1.0 - keep) * tx
                 positions[v, 1] -= (1.0 - keep) * ty
                 positions[v, 2] -= (1.0 - keep) * tz
+                moved += 1
+    return moved
 
 
 @njit(cache=True)
@@ -278,13 +291,16 @@ def project_ground(positions, start_positions, inverse_mass, ground_height, fric
     """Keep vertices above the table plane z = ground_height, with Coulomb friction: a
     vertex's slip along the table is cut by friction × its normal push, which is the depth
     projected out here plus ``support`` [m], the push the table gave it inside this
-    sub-step's implicit solve (see ``update_table_reaction``)."""
+    sub-step's implicit solve (see ``update_table_reaction``). Returns how many vertices
+    it moved."""
+    moved = 0
     for v in range(positions.shape[0]):
         if inverse_mass[v] == 0.0:
             continue
         depth = ground_height - positions[v, 2]
         if depth <= 0.0 and not (apply_friction and support[v] > 0.0):
             continue
+        moved += 1
         depth = max(depth, 0.0)
         positions[v, 2] = max(positions[v, 2], ground_height)
         if apply_friction and friction > 0.0:
@@ -295,6 +311,7 @@ def project_ground(positions, start_positions, inverse_mass, ground_height, fric
                 keep = max(0.0, 1.0 - friction * (depth + support[v]) / slip)
                 positions[v, 0] = start_positions[v, 0] + keep * tx
                 positions[v, 1] = start_positions[v, 1] + keep * ty
+    return moved
 
 
 @njit(cache=True)
@@ -339,7 +356,8 @@ def project_probes(positions, start_positions, inverse_mass, probe_start, probe_
     start to its end centre in moves of at most a quarter radius, so that a probe faster
     than one radius per step pushes the sheet along instead of tunnelling through it;
     friction acts on the final position only. ``touched`` (V,) bool marks every vertex a
-    probe moved."""
+    probe moved. Returns how many pushes it made (a vertex may count once per move)."""
+    moved = 0
     motion = np.empty(3)
     center = np.empty(3)
     for p in range(probe_radius.shape[0]):
@@ -356,8 +374,10 @@ def project_probes(positions, start_positions, inverse_mass, probe_start, probe_
             fraction = m / moves
             for k in range(3):
                 center[k] = probe_start[p, k] + fraction * motion[k]
-            _push_out_of_sphere(positions, start_positions, inverse_mass, center, motion,
-                                radius, friction, sweep and m == moves, pad_height, touched)
+            moved += _push_out_of_sphere(positions, start_positions, inverse_mass, center,
+                                         motion, radius, friction, sweep and m == moves,
+                                         pad_height, touched)
+    return moved
 
 
 @njit(cache=True)

@@ -865,37 +865,47 @@ class Simulator:
         # where the sheet folds away from its pins the strain concentrates (a released
         # sheet folds at its clamped edge); a few more sweeps there cost a few rows only.
         # They come first: the full sweeps after them smooth the seam at their border
+        # A pass that moved nothing ends its loop: the next would start where it did and
+        # move nothing either (a sheet within its band, as most are most of the time)
         near = self._near_pin_count
         for _ in range(NEAR_PIN_SWEEPS if near else 0):
+            moved = 0
             for reverse in (False, True):
-                kernels.project_springs(positions, inverse_mass, ends[:near],
-                                        rest[:near], shortest, longest, reverse)
+                moved += kernels.project_springs(positions, inverse_mass, ends[:near],
+                                                 rest[:near], shortest, longest, reverse)
+            if not moved:
+                break
         for _ in range(solver.constraint_iterations):
+            moved = 0
             for reverse in (False, True):
-                kernels.project_springs(positions, inverse_mass, ends, rest,
-                                        shortest, longest, reverse)
-            kernels.project_attachments(positions, self._attached, self._anchor,
-                                        self._attachment_length)
-            self._contact(positions, start_positions, probe_from, probe_to, False)
+                moved += kernels.project_springs(positions, inverse_mass, ends, rest,
+                                                 shortest, longest, reverse)
+            moved += kernels.project_attachments(positions, self._attached, self._anchor,
+                                                 self._attachment_length)
+            moved += self._contact(positions, start_positions, probe_from, probe_to, False)
+            if not moved:
+                break
 
     def _contact(self, positions, start_positions, probe_from, probe_to, with_friction,
-                 touched=None, table_friction=True):
+                 touched=None, table_friction=True) -> int:
+        """Push the sheet out of the probes and the table; how many pushes that took."""
         contact = self.config.contact
+        moved = 0
         # the probes first, the table last: the table is rigid, and a probe pressed into
         # it is flattened there like a fingertip, pinching the sheet on the table
         if self.probes.count:
-            kernels.project_probes(positions, start_positions, self._inverse_mass,
-                                   probe_from, probe_to, self.probes.radius,
-                                   self.probes.active,
-                                   contact.probe_friction if with_friction else 0.0, True,
-                                   contact.ground_height if contact.ground_enabled
-                                   else -np.inf,
-                                   touched if touched is not None
-                                   else np.zeros(positions.shape[0], dtype=bool))
+            moved += kernels.project_probes(
+                positions, start_positions, self._inverse_mass, probe_from, probe_to,
+                self.probes.radius, self.probes.active,
+                contact.probe_friction if with_friction else 0.0, True,
+                contact.ground_height if contact.ground_enabled else -np.inf,
+                touched if touched is not None else np.zeros(positions.shape[0], dtype=bool))
         if contact.ground_enabled:
-            kernels.project_ground(positions, start_positions, self._inverse_mass,
-                                   contact.ground_height, contact.ground_friction,
-                                   with_friction and table_friction, self._table_support)
+            moved += kernels.project_ground(positions, start_positions, self._inverse_mass,
+                                            contact.ground_height, contact.ground_friction,
+                                            with_friction and table_friction,
+                                            self._table_support)
+        return moved
 
     def _grip(self, positions, probe_to, touched) -> None:
         """A probe pressing the sheet into the table pinches it, and where the probe's
