@@ -12,7 +12,11 @@ paper/markers, paper/points and /diagnostics as usual (watch them with RViz and
 config/paper_sim.rviz from another shell on the same ROS_DOMAIN_ID), and records every
 published frame to ``<out>/demo.rrd`` (open it with ``rerun out/demo.rrd``). Ctrl-C ends it
 early; the recording is complete either way. The grid is 33 x 33 by default so that the demo
-keeps up with the wall clock on two cores; ``--grid 65`` is the node's own default.
+keeps up with the wall clock on two cores; ``--grid 65`` is the node's own default. With
+``--sim-time`` the simulation is the clock (``publish_clock``): it publishes /clock and the
+probe runs on it (``use_sim_time``), so a grid the machine cannot keep up with runs slower
+than real time, with the probe's path in simulated time as it would be in real time, instead
+of slipping (which shares the path the simulation could not follow out over fewer frames).
 """
 from __future__ import annotations
 
@@ -52,6 +56,8 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--out', default='out', help='output directory (default out)')
     parser.add_argument('--grid', type=int, default=33, help='vertices a side (default 33)')
     parser.add_argument('--no-record', action='store_true', help='do not write demo.rrd')
+    parser.add_argument('--sim-time', action='store_true',
+                        help='the simulation publishes /clock and the probe follows it')
     parser.add_argument('--camera-rate', type=float, default=10.0,
                         help='the virtual camera (paper/camera/...) [Hz] (default 10; 0: off)')
     arguments = parser.parse_args(argv)
@@ -85,10 +91,12 @@ def main(argv: list[str] | None = None) -> int:
             Parameter('publish_rate', value=15.0),
             Parameter('camera.rate', value=arguments.camera_rate),
             Parameter('rerun_path', value=recording),
+            Parameter('publish_clock', value=arguments.sim_time),
         ])
         nodes.append(simulation)
         executor.add_node(simulation)
-        probe = ScriptedProbe()
+        probe = ScriptedProbe(parameter_overrides=[
+            Parameter('use_sim_time', value=arguments.sim_time)])
         nodes.append(probe)
         probe_executor.add_node(probe)
         print(f'paper_sim demo: {arguments.duration:g} s, grid {arguments.grid}, ROS domain '
@@ -138,6 +146,7 @@ def _summary(simulation: PaperSimNode, wall_seconds: float) -> str:
             f'{wall_seconds:.1f} s: real-time factor {simulator.time / wall_seconds:.2f}; '
             f'{counters["slipped_frames"]} frames behind the clock, '
             f'{counters["dropped_frames"]} publications dropped), '
+            f'{counters["poses_received"]} probe poses, '
             f'{sheet.vertex_count} vertices, breaks {simulator.breaks}, '
             f'folds {simulator.folds}, max strain {last_second_strain:.2%} over the last '
             f'second, {run_strain:.2%} over the run, '

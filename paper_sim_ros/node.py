@@ -7,7 +7,10 @@ Timing. The simulation steps frames of exactly dt = 1 / ``physics_rate`` on a ti
 node's clock (wall clock, or ``/clock`` with ``use_sim_time``). Each tick steps as many frames
 as the clock has advanced, at most ``max_catchup_frames``; if it is further behind, the
 simulation slips (its clock origin moves forward, the real-time factor drops below 1) instead
-of taking bigger steps. Outputs are scheduled in simulated time at their own rates, and at
+of taking bigger steps. With ``publish_clock`` the simulation is the clock instead: it steps
+as fast as it can, up to ``max_real_time_factor``, never slips, and publishes its time on
+/clock after every frame for nodes run with ``use_sim_time``. Outputs are scheduled in
+simulated time at their own rates, and at
 most one of each is published per tick: when frames are stepped faster than outputs can
 follow, publications are dropped, never physics frames. Both are counted in ``/diagnostics``.
 
@@ -33,6 +36,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
 from rclpy.time import Time
+from rosgraph_msgs.msg import Clock as ClockMessage
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -72,6 +76,12 @@ at 65² takes 0.1-0.2 s) reach the track, which places each by its stamp. With d
 the last of them did, the track's poses lay too far apart to extrapolate from, and the probe
 stood still for the last frames of every tick, then went on at once (the demo, 65²: 13-15 %
 strain). Under a flood the same few poses wait, never more."""
+CLOCK_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                       reliability=ReliabilityPolicy.RELIABLE)
+"""/clock with ``publish_clock``: latest only (rclpy's time source reads it best-effort)."""
+CLOCK_TICK_SECONDS = 0.001
+"""With ``publish_clock``, the wall-clock period of the tick timer; each tick steps at most
+one frame (so at most 1 000 frames a wall-clock second)."""
 WARN_EVERY = 2.0
 """Seconds between two warnings of one kind (refused poses, failed ticks)."""
 
@@ -186,6 +196,9 @@ class PaperSimNode(Node):
         except ValueError as error:
             raise StartupError(f'invalid parameters: {error}') from None
         settings = self._settings
+        if settings.publish_clock and self.get_parameter('use_sim_time').value:
+            raise StartupError('publish_clock and use_sim_time exclude each other: the '
+                               'simulation would follow the clock it publishes')
 
         self.simulator = Simulator(settings.simulation)
         self._apply_pins()
@@ -208,13 +221,18 @@ class PaperSimNode(Node):
         self._markers_schedule = Schedule()
         self._camera_schedules = [Schedule() for _ in settings.cameras]
         self._cameras_on_tf_static: set[str] = set()
-        self._origin_ns: int | None = None
+        self._origin_ns: int | None = 0 if settings.publish_clock else None
+        """Clock time [ns] of frame 0: set by the first tick (publish_clock: 0, the start)."""
+        self._wall_origin_ns: int | None = None
+        """publish_clock: the steady clock [ns] at which frame 0 was due (the cap's base)."""
         self._delete_all_pending = True
         self._crumple_calls = 0
 
         self._points_pub = self.create_publisher(PointCloud2, 'paper/points', OUTPUT_QOS)
         self._markers_pub = self.create_publisher(MarkerArray, 'paper/markers', OUTPUT_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._clock_pub = (self.create_publisher(ClockMessage, '/clock', CLOCK_QOS)
+                           if settings.publish_clock else None)
         self._camera_pubs = [
             (self.create_publisher(Image, f'{prefix}/depth/image_raw', OUTPUT_QOS),
              self.create_publisher(Image, f'{prefix}/color/image_raw', OUTPUT_QOS),
@@ -232,7 +250,11 @@ class PaperSimNode(Node):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
-        self._tick_timer = self.create_timer(1.0 / settings.physics_rate, self._on_tick)
+        if settings.publish_clock:
+            self._tick_timer = self.create_timer(CLOCK_TICK_SECONDS, self._on_tick,
+                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
+        else:
+            self._tick_timer = self.create_timer(1.0 / settings.physics_rate, self._on_tick)
         self._diagnostics_timer = None
         self._start_diagnostics_timer()
         sheet = self.simulator.sheet
@@ -348,7 +370,7 @@ class PaperSimNode(Node):
                         f'the origin, farther than contact.max_probe_distance = {limit:g} m',
                         throttle_duration_sec=WARN_EVERY)
         else:
-            now = self.get_clock().now()
+            now = self._now()
             # a pose stamped on this clock is placed by its stamp, any other at a tick's end
             stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             if stamp_ns == 0 or abs(stamp_ns - now.nanoseconds) > \
@@ -383,21 +405,57 @@ class PaperSimNode(Node):
             self.get_logger().error(f'simulation tick failed: {error!r}',
                                     throttle_duration_sec=WARN_EVERY)
 
-    def _tick(self) -> None:
-        now = self.get_clock().now()
+    def _now(self) -> Time:
+        """The time the simulation lives in: the node's clock, or with ``publish_clock`` its
+        own (the simulated time it publishes)."""
+        if self._clock_pub is None:
+            return self.get_clock().now()
+        return Time(nanoseconds=self._simulated_ns(), clock_type=self.get_clock().clock_type)
+
+    def _simulated_ns(self) -> int:
+        """The clock time [ns] of the simulator's current frame."""
+        return self._origin_ns + int(round(self.simulator.frame
+                                           * self.simulator.config.solver.dt * 1e9))
+
+    def _frames_due(self, now: Time) -> int:
+        """Frames to step to catch up with the node's clock (``_tick`` steps at most
+        ``max_catchup_frames`` of them and slips the rest)."""
         simulator = self.simulator
-        dt = simulator.config.solver.dt
-        dt_ns = dt * 1e9
+        dt_ns = simulator.config.solver.dt * 1e9
         if self._origin_ns is None:
             self._origin_ns = now.nanoseconds - int(round(simulator.frame * dt_ns))
-            return
+            return 0
         due = int(math.floor((now.nanoseconds - self._origin_ns) / dt_ns + 0.25)) \
             - simulator.frame
         if due < -self._settings.physics_rate:
             # the clock jumped back by more than a second (a replayed /clock): follow it
             self.get_logger().warn('clock jumped back; re-basing the simulation clock')
             self._origin_ns = now.nanoseconds - int(round(simulator.frame * dt_ns))
-            return
+            return 0
+        return due
+
+    def _frames_free_running(self) -> int:
+        """With ``publish_clock``: one frame if ``max_real_time_factor`` allows it by now on
+        the steady clock (0: no cap), else none. One a tick, so that nodes on /clock answer
+        each frame before the next (a probe's pose for it); a simulation behind its cap
+        owes nothing: it is the clock, and runs as fast as it can."""
+        settings = self._settings
+        if settings.max_real_time_factor <= 0:
+            return 1
+        frame = self.simulator.frame
+        wall_ns = time.monotonic_ns()
+        frame_wall_ns = self.simulator.config.solver.dt * 1e9 / settings.max_real_time_factor
+        if self._wall_origin_ns is None \
+                or wall_ns - self._wall_origin_ns > (frame + 1) * frame_wall_ns:
+            self._wall_origin_ns = wall_ns - int(frame * frame_wall_ns)  # behind: rebase
+        return int(wall_ns - self._wall_origin_ns >= frame * frame_wall_ns)
+
+    def _tick(self) -> None:
+        simulator = self.simulator
+        dt = simulator.config.solver.dt
+        dt_ns = dt * 1e9
+        now = self._now()
+        due = self._frames_due(now) if self._clock_pub is None else self._frames_free_running()
         if due <= 0:
             return
         # where the last frame ended: the probes' path from there to this tick's last
@@ -449,6 +507,8 @@ class PaperSimNode(Node):
             stats.recent_strains.append(strain)
             if self._recorder is not None and frame < due - 1:
                 self._recorder.log_inputs(self._recording_time(), simulator)
+        if self._clock_pub is not None:
+            self._clock_pub.publish(ClockMessage(clock=self._stamp()))
         self._publish()
 
     def _set_probes(self, centers: np.ndarray, radii: np.ndarray, active: np.ndarray) -> None:
@@ -464,10 +524,7 @@ class PaperSimNode(Node):
         return self._stats.frames_stepped * self.simulator.config.solver.dt
 
     def _stamp(self):
-        simulator = self.simulator
-        nanoseconds = self._origin_ns + int(round(simulator.frame
-                                                  * simulator.config.solver.dt * 1e9))
-        return Time(nanoseconds=max(0, nanoseconds),
+        return Time(nanoseconds=max(0, self._simulated_ns()),
                     clock_type=self.get_clock().clock_type).to_msg()
 
     # ------------------------------------------------------------------------ publishing
@@ -557,9 +614,13 @@ class PaperSimNode(Node):
 
     # -------------------------------------------------------------------------- services
     def _on_reset(self, request, response):
+        # a published clock goes on from where it was (time never runs back); a followed
+        # one sets the origin again at the next tick
+        origin = self._simulated_ns() if self._clock_pub is not None else None
         self.simulator.reset()
         self._apply_pins()
-        self._origin_ns = None
+        self._origin_ns = origin
+        self._wall_origin_ns = None
         for probe in self._probes:
             probe.track.forget_placement()
         self._points_schedule = Schedule(dropped=self._points_schedule.dropped)

@@ -48,6 +48,8 @@ class NodeSettings:
     markers_rate: float
     diagnostics_rate: float
     max_catchup_frames: int
+    publish_clock: bool
+    max_real_time_factor: float
     material: str
     """The material preset the sheet.* and damage.* defaults came from; '' : none."""
     appearance: AppearanceConfig
@@ -95,6 +97,13 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'the clock; beyond that the simulation slips (real-time factor < 1, reported '
                   'in diagnostics). Publishing is what is dropped first, never physics frames.',
                   (1, 1000)),
+    ParameterSpec('publish_clock', False, 'The simulation is the clock: it steps as fast as '
+                  'it can (up to max_real_time_factor), never slips, and publishes its time on '
+                  '/clock after every frame, from 0, for nodes run with use_sim_time:=true '
+                  '(probe poses are then stamped in simulated time). Not with use_sim_time.',
+                  read_only=True),
+    ParameterSpec('max_real_time_factor', 1.0, 'With publish_clock: the most simulated '
+                  'seconds a wall-clock second; 0: no limit.', (0.0, 1000.0)),
     ParameterSpec('seed', 0, 'Seed of every random draw of the simulation (damage, crumple).',
                   (0, 2**62), read_only=True),
     ParameterSpec('material', '', "Material preset, one of '' (none), "
@@ -380,6 +389,8 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         markers_rate=_rate(values, 'markers_rate'),
         diagnostics_rate=_rate(values, 'diagnostics_rate'),
         max_catchup_frames=int(values['max_catchup_frames']),
+        publish_clock=bool(values['publish_clock']),
+        max_real_time_factor=_rate(values, 'max_real_time_factor'),
         material=material,
         appearance=appearance,
         pin_mode=pin_mode,

@@ -275,3 +275,67 @@ def test_use_sim_time_follows_clock(tmp_path):
     finally:
         client.close()
         stop_cleanly(process)
+
+
+def clock_seconds(message: Clock) -> float:
+    return message.clock.sec + 1e-9 * message.clock.nanosec
+
+
+@pytest.mark.slow
+def test_publish_clock_makes_the_simulation_the_clock(tmp_path):
+    """With publish_clock the node publishes its simulated time on /clock after every frame
+    (multiples of dt, increasing), no faster than max_real_time_factor, and stamps its
+    outputs with it; the probe's poses stamped on that clock are taken."""
+    domain = new_domain_id()
+    process = start_node(tmp_path, {**SMALL, 'publish_clock': True,
+                                    'max_real_time_factor': 0.5}, domain_id=domain)
+    client = RosClient(domain)
+    frame = 1.0 / 60.0
+    try:
+        client.subscribe(Clock, '/clock', QoSProfile(depth=1000,
+                                                     reliability=ReliabilityPolicy.RELIABLE))
+        client.subscribe(PointCloud2, 'paper/points')
+        client.subscribe(DiagnosticArray, '/diagnostics')
+        poses = client.node.create_publisher(PoseStamped, 'probe/pose', 10)
+
+        def pose_on_the_clock():
+            clock = client.latest('/clock')
+            if clock is not None:
+                pose = PoseStamped()
+                pose.header.frame_id = 'world'
+                pose.header.stamp = clock.clock
+                pose.pose.position.z = 0.05
+                pose.pose.orientation.w = 1.0
+                poses.publish(pose)
+        wait_for_cloud(client, process)
+        since = time.monotonic()
+        client.spin_for(2.0, pose_on_the_clock)
+        wall = time.monotonic() - since
+        clocks = [clock_seconds(message) for message in client.messages('/clock', since)]
+        cloud = client.latest('paper/points')
+        client.spin_for(1.5, pose_on_the_clock)  # a diagnostics report with the probe in it
+        report = client.latest('/diagnostics')
+    finally:
+        client.close()
+        stop_cleanly(process)
+    assert len(clocks) > 10, f'only {len(clocks)} /clock messages in {wall:.1f} s'
+    steps = np.diff(clocks)
+    assert (steps > 0).all(), 'the published clock did not always advance'
+    np.testing.assert_allclose(np.array(clocks) / frame, np.round(np.array(clocks) / frame),
+                               atol=1e-6, err_msg='/clock is not at frame times')
+    advanced = clocks[-1] - clocks[0]
+    assert advanced <= 0.5 * wall + 3 * frame, \
+        f'{advanced:.2f} s simulated in {wall:.2f} s: faster than the cap of 0.5'
+    stamp = cloud.header.stamp.sec + 1e-9 * cloud.header.stamp.nanosec
+    assert abs(stamp / frame - round(stamp / frame)) < 1e-6 and stamp <= clocks[-1] + 1e-9, \
+        f'the cloud is stamped {stamp}, not at a published clock time'
+    values = {item.key: item.value for item in report.status[0].values}
+    assert values['slipped_frames'] == '0', 'a simulation that is the clock slipped'
+    assert values['active_probes'] == '1' and values['poses_refused'] == '0', values
+
+
+def test_publish_clock_with_use_sim_time_is_a_clear_startup_error(tmp_path):
+    result = run_to_completion(tmp_path, {**SMALL, 'publish_clock': True,
+                                          'use_sim_time': True})
+    assert result.returncode == 1, result.stderr[-2000:]
+    assert 'publish_clock and use_sim_time exclude each other' in result.stderr
