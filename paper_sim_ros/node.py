@@ -344,6 +344,8 @@ class PaperSimNode(Node):
                 schedule.next_time = min(schedule.next_time, self.simulator.time)
         if self._settings.diagnostics_rate != previous.diagnostics_rate:
             self._start_diagnostics_timer()
+        if self._settings.max_real_time_factor != previous.max_real_time_factor:
+            self._wall_origin_ns = None  # the cap counts from now, at its new rate
         self.get_logger().info(f'parameters changed: {", ".join(sorted(changed))}')
 
     # --------------------------------------------------------------------------- probes

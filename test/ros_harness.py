@@ -17,6 +17,8 @@ from typing import Callable
 
 import numpy as np
 import rclpy
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
@@ -212,3 +214,22 @@ def parse_cloud(cloud) -> np.ndarray:
 def cloud_positions(cloud) -> np.ndarray:
     points = parse_cloud(cloud)
     return np.stack([points['x'], points['y'], points['z']], axis=1).astype(np.float64)
+
+
+def set_parameters(client, **values) -> list:
+    types = {bool: (ParameterType.PARAMETER_BOOL, 'bool_value'),
+             int: (ParameterType.PARAMETER_INTEGER, 'integer_value'),
+             float: (ParameterType.PARAMETER_DOUBLE, 'double_value'),
+             str: (ParameterType.PARAMETER_STRING, 'string_value')}
+    parameters = []
+    for name, value in values.items():
+        if isinstance(value, list):
+            value_msg = ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
+                                       double_array_value=value)
+        else:
+            kind, field = types[type(value)]
+            value_msg = ParameterValue(type=kind, **{field: value})
+        parameters.append(Parameter(name=name.replace('__', '.'), value=value_msg))
+    response = client.call(SetParameters, '/paper_sim/set_parameters',
+                           SetParameters.Request(parameters=parameters))
+    return response.results

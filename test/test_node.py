@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters, SetParameters
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from paper_sim_ros.core.materials import MATERIAL_PRESETS
-from ros_harness import (RosClient, cloud_positions, new_domain_id, parse_cloud, start_node,
-                         stop_cleanly)
+from ros_harness import (RosClient, cloud_positions, new_domain_id, parse_cloud, set_parameters,
+                         start_node, stop_cleanly)
 
 GRID = 17
 VERTICES = GRID * GRID
@@ -106,25 +106,6 @@ def assert_finite_outputs(client, since: float) -> None:
 def reset(client) -> None:
     response = client.call(Trigger, 'paper/reset', Trigger.Request())
     assert response.success, response.message
-
-
-def set_parameters(client, **values) -> list:
-    types = {bool: (ParameterType.PARAMETER_BOOL, 'bool_value'),
-             int: (ParameterType.PARAMETER_INTEGER, 'integer_value'),
-             float: (ParameterType.PARAMETER_DOUBLE, 'double_value'),
-             str: (ParameterType.PARAMETER_STRING, 'string_value')}
-    parameters = []
-    for name, value in values.items():
-        if isinstance(value, list):
-            value_msg = ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                                       double_array_value=value)
-        else:
-            kind, field = types[type(value)]
-            value_msg = ParameterValue(type=kind, **{field: value})
-        parameters.append(Parameter(name=name.replace('__', '.'), value=value_msg))
-    response = client.call(SetParameters, '/paper_sim/set_parameters',
-                           SetParameters.Request(parameters=parameters))
-    return response.results
 
 
 def get_parameter(client, name: str):
