@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from paper_sim_ros.core import (ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
-                                 Simulator, SolverConfig)
+                                Simulator, SolverConfig)
 from paper_sim_ros.core.bending import SheetBending, hinge_quads
 from paper_sim_ros.core.sheet import build_flat_sheet
 from paper_sim_ros.core.topology import NO_VERTEX, mesh_edges

@@ -431,6 +431,18 @@ def _spring_strain(positions, spring_vertices, rest_length, s):
 
 
 @njit(cache=True)
+def squeezed_excess(positions, spring_vertices, rest_length, compression_threshold):
+    """What ``projective.local_targets`` returns, Σ max(0, 1 − l/l0 − compression_threshold),
+    without its right-hand side: the check that most sub-steps end the buckling iterations
+    with (a sheet not squeezed), at half a local step's cost."""
+    excess = 0.0
+    for s in range(spring_vertices.shape[0]):
+        excess += max(0.0, -_spring_strain(positions, spring_vertices, rest_length, s)
+                      - compression_threshold)
+    return excess
+
+
+@njit(cache=True)
 def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
     """Largest |l/l0 - 1| over the springs of one kind."""
     largest = 0.0

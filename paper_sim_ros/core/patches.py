@@ -46,6 +46,7 @@ AXIS_TOLERANCE = 1e-6
 """An edge lies along a material axis when its offset across it is below this share of
 its length."""
 
+
 def _second_difference(before: np.ndarray, after: np.ndarray) -> tuple[np.ndarray, ...]:
     """Coefficients (before, centre, after) of the second derivative through three vertices
     in a line, spacings ``before`` and ``after`` [m] (unequal allowed)."""

@@ -53,23 +53,6 @@ def local_targets(positions, weighted_inertia, spring_vertices, rest_length, wei
 
 
 @njit(cache=True)
-def squeezed_excess(positions, spring_vertices, rest_length, compression_threshold):
-    """What ``local_targets`` returns, Σ max(0, 1 − l/l0 − compression_threshold), without
-    its right-hand side: the check that most sub-steps end the buckling iterations with
-    (a sheet not squeezed), at half a local step's cost."""
-    excess = 0.0
-    for s in range(spring_vertices.shape[0]):
-        i = spring_vertices[s, 0]
-        j = spring_vertices[s, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        dz = positions[j, 2] - positions[i, 2]
-        length = np.sqrt(dx * dx + dy * dy + dz * dz)
-        excess += max(0.0, -(length / rest_length[s] - 1.0) - compression_threshold)
-    return excess
-
-
-@njit(cache=True)
 def _solve_factored(pointer, index, value, diagonal, permutation, coupling_pointer,
                     coupling_index, coupling_value, free, rhs, positions, work):
     """positions[free] ← A⁻¹ (rhs - A_fp x_p)[free] from P A Pᵀ = L D Lᵀ, on the three

@@ -33,7 +33,7 @@ from .probes import Probes
 from .kernels import EPSILON_LENGTH
 from .mesh_editing import spring_lengths
 from .projective import (ConstrainedSolve, global_step, inertial_step, local_targets,
-                         spring_entries, squeezed_excess)
+                         spring_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
 from .topology import two_edge_path_lengths, vertex_normals
 
@@ -645,8 +645,8 @@ class Simulator:
         crumpled sheet stays compressed where it cannot buckle any further). Why they run
         on both sides of the bending solve, with figures: docs/solver.md."""
         buckling_compression = self.config.solver.buckling_compression
-        if most <= 0 or squeezed_excess(positions, self._held_ends, self._held_rest,
-                                        buckling_compression) == 0.0:
+        if most <= 0 or kernels.squeezed_excess(positions, self._held_ends, self._held_rest,
+                                                buckling_compression) == 0.0:
             return  # not squeezed (most sub-steps): no local step's right-hand side needed
         excess = np.inf
         for _ in range(most):
