@@ -730,7 +730,7 @@ class PaperSimNode(Node):
         }
         status = diagnostic_status(DIAGNOSTIC_NAME, self.get_fully_qualified_name(), level,
                                    message, values)
-        now = self.get_clock().now().to_msg()
+        now = self._now().to_msg()  # with publish_clock, the simulated time as everywhere
         self._send(self._diagnostics_pub, diagnostic_array(now, [status]), now)
         stats.window_started = wall
         stats.window_frames = stats.window_steps = stats.window_publishes = 0
