@@ -103,7 +103,8 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   '(probe poses are then stamped in simulated time). Not with use_sim_time.',
                   read_only=True),
     ParameterSpec('max_real_time_factor', 1.0, 'With publish_clock: the most simulated '
-                  'seconds a wall-clock second; 0: no limit.', (0.0, 1000.0)),
+                  'seconds a wall-clock second; 0: as fast as it steps (at most 1 000 frames a '
+                  'wall-clock second).', (0.0, 1000.0)),
     ParameterSpec('seed', 0, 'Seed of every random draw of the simulation (damage, crumple).',
                   (0, 2**62), read_only=True),
     ParameterSpec('material', '', "Material preset, one of '' (none), "
