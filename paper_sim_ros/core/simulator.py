@@ -363,15 +363,12 @@ class Simulator:
         mass, velocities = sheet.vertex_mass, sheet.velocities
         scaled = velocities
         if not np.any(sheet.pinned):
-            centre = (mass[:, None] * sheet.positions).sum(0) / mass.sum()
-            offset = sheet.positions - centre
-            drift = (mass[:, None] * velocities).sum(0) / mass.sum()
-            # I = Σ m (|r|² 1 − r rᵀ) about the centre; ω = I⁻¹ L (least squares: a line)
-            inertia = np.eye(3) * float(mass @ np.einsum('va,va->v', offset, offset)) \
-                - np.einsum('v,va,vb->ab', mass, offset, offset)
-            spin = np.linalg.lstsq(inertia, kernels.angular_momentum(
-                sheet.positions, velocities, mass), rcond=None)[0]
-            scaled = velocities - drift - np.cross(spin, offset)
+            # less the drift, then less the spin: all the angular momentum taken out by the
+            # rigid turn the momentum keeping uses (h = 0: the positions stay)
+            scaled = velocities - (mass[:, None] * velocities).sum(0) / mass.sum()
+            kernels.remove_angular_momentum(
+                sheet.positions, scaled, mass,
+                kernels.angular_momentum(sheet.positions, velocities, mass), 0.0, False)
         kinetic = float(0.5 * np.sum(mass * np.sum(scaled ** 2, axis=1)))
         if kinetic <= RESTORE_FLOOR:
             return
