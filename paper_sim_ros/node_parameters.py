@@ -159,6 +159,14 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver.global_stiffness', _SOLVER.global_stiffness,
                   "Weight of the held springs in the global step [N/m] ('constrained'; a "
                   'solver weight, not the material stiffness).', (1.0e-3, 1.0e9)),
+    ParameterSpec('solver.air_damping', _SOLVER.air_damping,
+                  'Linear air drag rate, mass proportional [1/s].', (0.0, 1000.0)),
+    ParameterSpec('solver.air_density', _SOLVER.air_density,
+                  'Density of the air [kg/m^3] (0: vacuum), for the drag across the sheet.',
+                  (0.0, 100.0)),
+    ParameterSpec('solver.drag_coefficient', _SOLVER.drag_coefficient,
+                  "Pressure drag coefficient of the sheet moving along its normal (a flat "
+                  "plate's, about 1.2: a flat sheet falls at about 1 m/s).", (0.0, 100.0)),
     ParameterSpec('solver.energy_restoring', _SOLVER.energy_restoring,
                   "After a frame of free motion (no probe, off the table, nothing yielded "
                   "or broke), give back the energy the step lost beyond air drag "

@@ -112,6 +112,14 @@ class SolverConfig:
     """Compression the projection aims for at most (1 - l/l0)."""
     air_damping: float = 0.2
     """Linear air drag rate [1/s], mass proportional."""
+    air_density: float = 1.2
+    """Density of the air [kg/m³] (0: vacuum), for the drag across the sheet."""
+    drag_coefficient: float = 1.2
+    """Pressure drag coefficient of the sheet moving along its normal (a flat plate's,
+    ~1.2): each vertex's normal speed v_n loses ½ ρ C_d v_n² of pressure over its area,
+    so a flat 80 g/m² sheet falls at about 1 m/s and a swinging one is slowed by the air
+    it pushes, as paper is; edgewise it meets only ``air_damping``. ('constrained'; the
+    paper's own solvers keep its model, ``air_damping`` alone.)"""
     gravity: tuple = (0.0, 0.0, -9.81)
     """Gravity [m/s²]."""
     energy_restoring: bool = False
@@ -138,6 +146,8 @@ class SolverConfig:
             _require(math.isfinite(value) and 0 < value < 0.5,
                      f'{name} must be in (0, 0.5), got {value!r}')
         _finite_non_negative('air_damping', self.air_damping)
+        _finite_non_negative('air_density', self.air_density)
+        _finite_non_negative('drag_coefficient', self.drag_coefficient)
         _require(math.isfinite(self.buckling_compression) and 0 < self.buckling_compression < 1,
                  f'buckling_compression must be in (0, 1), got {self.buckling_compression!r}')
         _finite_positive('global_stiffness', self.global_stiffness)

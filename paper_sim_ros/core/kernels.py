@@ -315,6 +315,26 @@ def project_ground(positions, start_positions, inverse_mass, ground_height, fric
 
 
 @njit(cache=True)
+def normal_air_drag(velocities, normals, mass, rate, h):
+    """Quadratic air drag along each vertex's unit normal, dv_n/dt = -rate |v_n| v_n
+    (rate = ½ ρ C_d / grammage [1/m]: the pressure ½ ρ C_d v_n² on a vertex's area over
+    its mass), taken semi-implicitly, v_n ← v_n / (1 + h rate |v_n|): it slows the normal
+    speed and never reverses it, whatever the step. Returns the kinetic energy the air
+    took [J]."""
+    taken = 0.0
+    for v in range(velocities.shape[0]):
+        normal_speed = (velocities[v, 0] * normals[v, 0] + velocities[v, 1] * normals[v, 1]
+                        + velocities[v, 2] * normals[v, 2])
+        kept = normal_speed / (1.0 + h * rate * abs(normal_speed))
+        loss = normal_speed - kept
+        velocities[v, 0] -= loss * normals[v, 0]
+        velocities[v, 1] -= loss * normals[v, 1]
+        velocities[v, 2] -= loss * normals[v, 2]
+        taken += 0.5 * mass[v] * (normal_speed * normal_speed - kept * kept)
+    return taken
+
+
+@njit(cache=True)
 def table_friction(velocities, support, friction, h):
     """Coulomb friction of the table on the velocities a step starts from: each vertex the
     table supports (``support`` [m], its push over the last sub-step) loses up to

@@ -141,7 +141,6 @@ BUILTIN_SCENARIOS: dict[str, dict[str, Any]] = {
         'duration': 5.0,
         'pin': 'short_edge',
         'sheet': {'elevation': 0.5},
-        'solver': {'air_damping': 2.0},
         'contact': {'ground_enabled': False},
         'probes': [{
             'name': 'probe',
