@@ -159,51 +159,104 @@ def jacobi_iterate(diagonal_inverse, coupling, spring_vertices, rhs, pinned, ite
             delta_v[v, 2] = w[2, 0] * bx + w[2, 1] * by + w[2, 2] * bz
 
 
+SPRING_BLOCK = 64
+"""Springs a block of the strain limiting's sweeps (``project_springs``) holds: a sweep
+passes over a block only where a vertex of its springs moved since it last did."""
+
+
+@njit(cache=True)
+def spring_blocks(spring_vertices, vertex_count):
+    """For each vertex, the blocks of SPRING_BLOCK consecutive springs that hold a spring
+    of it, as (pointer, blocks) in CSR form: what a move of that vertex makes dirty."""
+    count = spring_vertices.shape[0]
+    incident = np.zeros(vertex_count + 1, dtype=np.int64)
+    for s in range(count):
+        incident[spring_vertices[s, 0] + 1] += 1
+        incident[spring_vertices[s, 1] + 1] += 1
+    for v in range(vertex_count):
+        incident[v + 1] += incident[v]
+    fill = incident[:-1].copy()
+    block_of = np.empty(incident[-1], dtype=np.int64)
+    for s in range(count):  # by spring: each vertex's blocks come out in order
+        for end in range(2):
+            v = spring_vertices[s, end]
+            block_of[fill[v]] = s // SPRING_BLOCK
+            fill[v] += 1
+    pointer = np.zeros(vertex_count + 1, dtype=np.int64)
+    blocks = np.empty(incident[-1], dtype=np.int64)
+    used = 0
+    for v in range(vertex_count):
+        last = -1
+        for k in range(incident[v], incident[v + 1]):
+            if block_of[k] != last:
+                last = block_of[k]
+                blocks[used] = last
+                used += 1
+        pointer[v + 1] = used
+    return pointer, blocks[:used].copy()
+
+
 @njit(cache=True)
 def project_springs(positions, inverse_mass, spring_vertices, rest_length, shortest, longest,
-                    reverse):
+                    reverse, dirty, block_pointer, blocks):
     """One Gauss–Seidel sweep of strain limiting (Provot): a spring longer than
     ``longest`` × l0 or shorter than ``shortest`` × l0 is moved back to that bound, the
     correction shared by inverse mass. ``reverse`` sweeps from the last spring, so that
     alternating sweeps carry corrections both ways across the sheet. Returns how many
-    springs it moved (none: the sweep left every position as it was)."""
+    springs it moved (none: the sweep left every position as it was).
+    Only the ``dirty`` blocks of SPRING_BLOCK springs are swept (``spring_blocks``: a
+    spring moved marks every block of its two vertices, itself included). A clean block's
+    springs were all within the band when it was last swept and none of their vertices
+    has moved since, so skipping it changes nothing: the sweep is the full sweep's."""
     count = spring_vertices.shape[0]
+    block_count = (count + SPRING_BLOCK - 1) // SPRING_BLOCK
     moved = 0
-    for n in range(count):
-        s = count - 1 - n if reverse else n
-        i = spring_vertices[s, 0]
-        j = spring_vertices[s, 1]
-        wi = inverse_mass[i]
-        wj = inverse_mass[j]
-        w = wi + wj
-        if w == 0.0:
+    for m in range(block_count):
+        block = block_count - 1 - m if reverse else m
+        if not dirty[block]:
             continue
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        dz = positions[j, 2] - positions[i, 2]
-        squared = dx * dx + dy * dy + dz * dz
-        upper = longest * rest_length[s]
-        lower = shortest * rest_length[s]
-        # most springs are within the band: no square root for them
-        if lower * lower < squared < upper * upper:
-            continue
-        length = np.sqrt(squared)
-        if length < EPSILON_LENGTH:
-            continue
-        if length > upper:
-            target = upper
-        elif length < lower:
-            target = lower
-        else:
-            continue
-        scale = (length - target) / (length * w)
-        positions[i, 0] += wi * scale * dx
-        positions[i, 1] += wi * scale * dy
-        positions[i, 2] += wi * scale * dz
-        positions[j, 0] -= wj * scale * dx
-        positions[j, 1] -= wj * scale * dy
-        positions[j, 2] -= wj * scale * dz
-        moved += 1
+        dirty[block] = False
+        first = block * SPRING_BLOCK
+        last = min(first + SPRING_BLOCK, count)
+        for n in range(last - first):
+            s = last - 1 - n if reverse else first + n
+            i = spring_vertices[s, 0]
+            j = spring_vertices[s, 1]
+            wi = inverse_mass[i]
+            wj = inverse_mass[j]
+            w = wi + wj
+            if w == 0.0:
+                continue
+            dx = positions[j, 0] - positions[i, 0]
+            dy = positions[j, 1] - positions[i, 1]
+            dz = positions[j, 2] - positions[i, 2]
+            squared = dx * dx + dy * dy + dz * dz
+            upper = longest * rest_length[s]
+            lower = shortest * rest_length[s]
+            # most springs are within the band: no square root for them
+            if lower * lower < squared < upper * upper:
+                continue
+            length = np.sqrt(squared)
+            if length < EPSILON_LENGTH:
+                continue
+            if length > upper:
+                target = upper
+            elif length < lower:
+                target = lower
+            else:
+                continue
+            scale = (length - target) / (length * w)
+            positions[i, 0] += wi * scale * dx
+            positions[i, 1] += wi * scale * dy
+            positions[i, 2] += wi * scale * dz
+            positions[j, 0] -= wj * scale * dx
+            positions[j, 1] -= wj * scale * dy
+            positions[j, 2] -= wj * scale * dz
+            for k in range(block_pointer[i], block_pointer[i + 1]):
+                dirty[blocks[k]] = True
+            for k in range(block_pointer[j], block_pointer[j + 1]):
+                dirty[blocks[k]] = True
+            moved += 1
     return moved
 
 

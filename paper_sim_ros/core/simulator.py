@@ -213,6 +213,9 @@ class Simulator:
         self._constraint_ends = sheet.spring_vertices[self._constraint_springs]
         self._constraint_rest = sheet.spring_rest_length[self._constraint_springs]
         self._near_pin_count = int(np.sum(level.min(axis=1) < NEAR_PIN_LEVELS))
+        self._spring_blocks = kernels.spring_blocks(self._constraint_ends, sheet.vertex_count)
+        self._dirty_blocks = np.ones(-(-self._constraint_ends.shape[0] // kernels.SPRING_BLOCK),
+                                     dtype=np.bool_)
         self._build_attachments()
         # held springs enter the global step with a solver weight; bending has its own step
         # (BEND springs, second order in the fold angle, only mark the hinges here)
@@ -884,23 +887,33 @@ class Simulator:
         # They come first: the full sweeps after them smooth the seam at their border
         # A pass that moved nothing ends its loop: the next would start where it did and
         # move nothing either (a sheet within its band, as most are most of the time)
+        # A sweep passes only over the blocks of springs whose vertices moved since it last
+        # passed there (kernels.project_springs): the same sweeps, at the cost of the few
+        # springs out of the band where the rest of the sheet is within it
         near = self._near_pin_count
+        dirty = self._dirty_blocks
+        blocks = self._spring_blocks
+        dirty[:] = True
         for _ in range(NEAR_PIN_SWEEPS if near else 0):
             moved = 0
             for reverse in (False, True):
                 moved += kernels.project_springs(positions, inverse_mass, ends[:near],
-                                                 rest[:near], shortest, longest, reverse)
+                                                 rest[:near], shortest, longest, reverse,
+                                                 dirty, *blocks)
             if not moved:
                 break
+        dirty[:] = True
         for _ in range(solver.constraint_iterations):
             moved = 0
             for reverse in (False, True):
                 moved += kernels.project_springs(positions, inverse_mass, ends, rest,
-                                                 shortest, longest, reverse)
-            moved += kernels.project_attachments(positions, self._attached, self._anchor,
-                                                 self._attachment_length)
-            moved += self._contact(positions, start_positions, probe_from, probe_to, False)
-            if not moved:
+                                                 shortest, longest, reverse, dirty, *blocks)
+            others = kernels.project_attachments(positions, self._attached, self._anchor,
+                                                 self._attachment_length) \
+                + self._contact(positions, start_positions, probe_from, probe_to, False)
+            if others:
+                dirty[:] = True  # they do not say which vertices they moved
+            if not moved + others:
                 break
 
     def _contact(self, positions, start_positions, probe_from, probe_to, with_friction,
