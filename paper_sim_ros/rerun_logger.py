@@ -155,10 +155,26 @@ def _segments(positions: np.ndarray, ends: np.ndarray, strip_type):
     return pa.ListArray.from_arrays(offsets, inner, type=strip_type)
 
 
+def view_bounds(simulator) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (low, high) [m] of the box the 3-D view frames: the sheet as it starts, and,
+    if it is pinned, as far below its pins as it is long (a pinned sheet swings down and
+    hangs there), but not below the table."""
+    positions = simulator.sheet.positions
+    low, high = positions.min(axis=0), positions.max(axis=0)
+    pinned = simulator.sheet.pinned
+    if np.any(pinned):
+        low[2] = min(low[2], positions[pinned, 2].min() - float(np.max(high - low)))
+    contact = simulator.config.contact
+    if contact.ground_enabled:
+        low[2] = max(low[2], min(contact.ground_height, high[2]))
+    return low, high
+
+
 def default_blueprint(center: np.ndarray | None = None, size: float | None = None,
                       cameras: tuple[str, ...] = ()):
     """A 3D view of the sheet beside the metric plots and the session info. With the sheet's
-    ``center`` and ``size`` [m], the camera looks at it obliquely from the front, low side.
+    ``center`` and ``size`` [m], the camera looks at it obliquely from the front, low side,
+    from far enough (1.7 times its size) that it stays in view as it moves.
     Each virtual camera of ``cameras`` (names) gets a 2-D view of what it saw."""
     import rerun.blueprint as rrb
 
@@ -168,7 +184,7 @@ def default_blueprint(center: np.ndarray | None = None, size: float | None = Non
 
     eye = None
     if center is not None and size:
-        eye = rrb.EyeControls3D(position=tuple(np.asarray(center) + size * np.array(
+        eye = rrb.EyeControls3D(position=tuple(np.asarray(center) + 1.5 * size * np.array(
             [0.45, -0.85, 0.62])), look_target=tuple(center), eye_up=(0.0, 0.0, 1.0))
     view_3d = rrb.Spatial3DView(
         name='sheet', origin='/paper',
@@ -322,8 +338,7 @@ class RerunRecorder:
             sheet = simulator.sheet
             if not self._parameters_logged:
                 self._log_parameters(simulator)
-                positions = sheet.positions
-                low, high = positions.min(axis=0), positions.max(axis=0)
+                low, high = view_bounds(simulator)
                 stream.send_blueprint(default_blueprint(
                     0.5 * (low + high), float(max(np.max(high - low), 0.05)), self._cameras))
             self._log_mesh(sheet, vertex_colors)

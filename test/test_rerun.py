@@ -22,7 +22,7 @@ from paper_sim_ros import rerun_replay
 from paper_sim_ros.core import build_simulator, run_scenario
 from paper_sim_ros.core.scenarios import scenario_from_mapping
 from paper_sim_ros.headless import main as headless_main
-from paper_sim_ros.rerun_logger import RerunRecorder
+from paper_sim_ros.rerun_logger import RerunRecorder, view_bounds
 
 REPO = Path(__file__).resolve().parents[1]
 METRICS = ('step_time', 'real_time_factor', 'energy', 'max_strain', 'breaks', 'folds')
@@ -413,3 +413,20 @@ def test_streams_to_a_running_rerun_server(tmp_path):
     assert len(meshes) == scenario.frame_count
     assert rerun_replay.read_recording_info(str(snapshot))['scenario']['name'] == 'pinch'
     np.testing.assert_allclose(meshes[-1].positions, simulator.sheet.positions, atol=1e-6)
+
+
+@pytest.mark.parametrize('ground, expected_low', [(False, 0.5 - 0.297), (True, 0.3)])
+def test_the_view_frames_where_a_pinned_sheet_will_hang(ground, expected_low):
+    """The 3-D view is set from the first frame: a sheet pinned along its short edge,
+    released flat 0.5 m up, swings down by its length (0.297 m), so the view reaches that
+    far below the pins, or down to the table where there is one (0.3 m here); a sheet
+    nothing pins is framed as it lies."""
+    mapping = {'name': 'view', 'pin': 'short_edge',
+               'sheet': {'nx': 9, 'ny': 9, 'elevation': 0.5},
+               'contact': {'ground_enabled': ground, 'ground_height': 0.3}}
+    low, high = view_bounds(build_simulator(scenario_from_mapping(mapping)))
+    np.testing.assert_allclose(low[2], expected_low, atol=1e-9)
+    np.testing.assert_allclose(high[2], 0.5, atol=1e-9)
+    np.testing.assert_allclose([low[1], high[1]], [-0.1485, 0.1485], atol=1e-9)
+    free = build_simulator(scenario_from_mapping({**mapping, 'pin': 'none'}))
+    np.testing.assert_allclose(view_bounds(free)[0][2], 0.5, atol=1e-9)
