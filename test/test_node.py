@@ -196,10 +196,18 @@ def test_a_probe_moves_the_points_under_it_and_letting_go_stops_it(sim):
     under = np.hypot(flat[:, 0] - PRESS[0], flat[:, 1] - PRESS[1]) < 0.015
     away = np.hypot(flat[:, 0], flat[:, 1]) > 0.08
     assert under.sum() >= 1 and away.sum() > 100
-    press_for(sim, 1.5)
-    pressed = cloud_positions(fresh_cloud(sim))[:VERTICES]
-    lift = pressed[under, 2].max()
-    assert lift > 0.01, f'the probe lifted the sheet above it only by {lift:.4f} m'
+    # the node steps in real time beside the test: on a loaded machine its cloud can trail
+    # the poses, so the press goes on (up to 6 s) until the cloud shows the sheet lifted
+    press_for(sim, 1.0)
+    deadline = time.monotonic() + 5.0
+    while True:
+        press_for(sim, 0.5)
+        pressed = cloud_positions(fresh_cloud(sim))[:VERTICES]
+        lift = pressed[under, 2].max()
+        if lift > 0.01 or time.monotonic() > deadline:
+            break
+    assert lift > 0.01, f'the probe lifted the sheet above it only by {lift:.4f} m ' \
+        f'(diagnostics: {diagnostics(sim)})'
     assert pressed[away, 2].max() < 0.01, 'the far sheet moved as much as the pressed part'
     assert int(diagnostics(sim)['active_probes']) == 1
     sim.spin_for(2.5)  # no more poses: after probe_timeout the probe lets go
