@@ -478,13 +478,13 @@ class Simulator:
         """One sub-step of ``h`` [s], the probes moving from ``probe_from`` to ``probe_to``."""
         sheet = self.sheet
         positions, velocities = sheet.positions, sheet.velocities
-        self._air_drag(h)
         start_positions = positions.copy()
         # the table's push inside the last solve, as a displacement [m]: its friction's share
         self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
         # inertia, springs and bending: implicit ('constrained') or as forces
         constrained = self.config.solver.method == 'constrained'
         if constrained:
+            self._air_drag(h)
             contact = self.config.contact
             if contact.ground_enabled:
                 kernels.table_friction(velocities, self._table_support,
@@ -533,11 +533,12 @@ class Simulator:
         """The air's pressure drag across the sheet (``drag_coefficient``), on the velocities
         the sub-step starts from: normal to the sheet, where paper meets the air it must
         push aside (``kernels.normal_air_drag``). Before the momentum a free sheet keeps is
-        read, so that its torque is kept too. 'constrained' only: the paper's own solvers
-        keep the paper's model (linear air drag alone), which its figures are checked on."""
+        read, so that its torque is kept too. The implicit solver's only: the paper's own
+        solvers keep the paper's model (linear air drag alone), which its figures are
+        checked on."""
         solver = self.config.solver
         rate = 0.5 * solver.air_density * solver.drag_coefficient / self.config.sheet.grammage
-        if rate > 0.0 and solver.method == 'constrained':
+        if rate > 0.0:
             sheet = self.sheet
             self._air_taken += kernels.normal_air_drag(
                 sheet.velocities, vertex_normals(sheet.positions, sheet.triangles),
