@@ -432,13 +432,29 @@ def test_global_step_solves_its_system_with_pins():
         np.testing.assert_array_equal(positions[pinned], pinned_positions)
 
 
+def assert_steps_solve_as_new_factors(simulator, h: float, rng) -> None:
+    """The simulator's two global steps solve as new factors of its mesh's systems do."""
+    from paper_sim_ros.core.projective import GlobalStep, spring_entries
+    sheet = simulator.sheet
+    for solve, entries in (
+            (simulator._global_step,
+             spring_entries(simulator._held_ends, simulator._global_weight)),
+            (simulator._bending_step, simulator._bending.matrix_entries())):
+        rhs = rng.normal(size=(sheet.vertex_count, 3))
+        positions = sheet.positions.copy()
+        fresh = sheet.positions.copy()
+        solve.step.solve(rhs, positions)
+        GlobalStep(sheet.vertex_mass, sheet.pinned, entries, h).solve(rhs, fresh)
+        np.testing.assert_allclose(positions, fresh, rtol=0, atol=1e-9 * np.abs(fresh).max())
+
+
 def test_damage_updates_the_factors_exactly():
     """Breaks and folds one after another (new vertices, new springs, changed hinges)
     reuse the last factors (projective.UpdatedStep, Woodbury's identity) and give what a
     new factor of the changed mesh gives, to round-off; once the updates have cost more
     than a factor, the simulator factors afresh."""
     from paper_sim_ros.core import projective
-    from paper_sim_ros.core.projective import GlobalStep, UpdatedStep, spring_entries
+    from paper_sim_ros.core.projective import GlobalStep, UpdatedStep
     scenario = load_scenario('hanging', grid=17, seed=4)
     simulator = build_simulator(scenario)
     h = scenario.config.solver.dt / scenario.config.solver.substeps
@@ -448,17 +464,9 @@ def test_damage_updates_the_factors_exactly():
         vertex_count = simulator.sheet.vertex_count
         simulator.crumple(1, seed=event)
         sheet = simulator.sheet
-        for solve, entries in (
-                (simulator._global_step,
-                 spring_entries(simulator._held_ends, simulator._global_weight)),
-                (simulator._bending_step, simulator._bending.matrix_entries())):
-            updated += isinstance(solve.step, UpdatedStep)
-            rhs = rng.normal(size=(sheet.vertex_count, 3))
-            positions = sheet.positions.copy()
-            fresh = sheet.positions.copy()
-            solve.step.solve(rhs, positions)
-            GlobalStep(sheet.vertex_mass, sheet.pinned, entries, h).solve(rhs, fresh)
-            np.testing.assert_allclose(positions, fresh, rtol=0, atol=1e-9 * np.abs(fresh).max())
+        steps = (simulator._global_step.step, simulator._bending_step.step)
+        updated += sum(isinstance(step, UpdatedStep) for step in steps)
+        assert_steps_solve_as_new_factors(simulator, h, rng)
         assert sheet.vertex_count >= vertex_count
     assert simulator.breaks > 0 and simulator.folds > 0
     assert updated >= 12, 'the changes were factored anew, not updated'
@@ -470,6 +478,32 @@ def test_damage_updates_the_factors_exactly():
     assert step.stale
     simulator.step_frame()
     assert isinstance(simulator._bending_step.step, GlobalStep)
+
+
+def test_a_fold_updates_the_factors_from_its_own_terms(monkeypatch):
+    """A fold leaves the triangles as they were: the springs' system gains one held spring
+    and the bending's loses a hinge and the patches across it. Those terms alone update
+    the factors (UpdatedStep.changed_by), without assembling either system anew, and the
+    solves are what a new factor of the folded mesh gives, to round-off."""
+    mapping = with_overrides(builtin_mapping('hanging'), grid=17, seed=2)
+    mapping['damage'] = {'crumple_fold_fraction': 1.0}
+    scenario = scenario_from_mapping(mapping)
+    simulator = build_simulator(scenario)
+    h = scenario.config.solver.dt / scenario.config.solver.substeps
+    assembled = []
+    original = simulator_module.global_step
+    monkeypatch.setattr(simulator_module, 'global_step',
+                        lambda *args: assembled.append(1) or original(*args))
+    rng = np.random.default_rng(3)
+    from_terms = 0
+    for event in range(6):
+        folds, calls = simulator.folds, len(assembled)
+        simulator.crumple(1, seed=event)
+        assert simulator.folds == folds + 1 and simulator.breaks == 0
+        assert_steps_solve_as_new_factors(simulator, h, rng)
+        # (a factor is renewed once the folds since it touch too many vertices)
+        from_terms += len(assembled) == calls
+    assert from_terms >= 4, 'the folds assembled the systems anew'
 
 
 def test_constrained_solve_equals_a_factor_with_the_vertices_held():

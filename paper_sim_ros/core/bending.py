@@ -264,6 +264,21 @@ def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_cur
     return yielded
 
 
+def _bending_entries(quads, weights, hinge_stiffness, stencil, coefficients, patch_weight
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, columns, values) of Σ k w wᵀ over hinges and Σ w c cᵀ over patches' rows."""
+    rows = np.repeat(quads, 4, axis=1).ravel()
+    columns = np.tile(quads, (1, 4)).ravel()
+    values = (hinge_stiffness[:, None, None] * weights[:, :, None]
+              * weights[:, None, :]).ravel()
+    vertex = np.where(stencil >= 0, stencil, stencil[:, :1])  # padding: 0 coefficients
+    patch_values = np.einsum('p,pka,pkb->pab', patch_weight, coefficients, coefficients)
+    width = vertex.shape[1]
+    return (np.concatenate([rows, np.repeat(vertex, width, axis=1).ravel()]),
+            np.concatenate([columns, np.tile(vertex, (1, width)).ravel()]),
+            np.concatenate([values, patch_values.ravel()]))
+
+
 class SheetBending:
     """The bending state of one mesh: vertex patches where the sheet is intact
     (core/patches.py), hinges where damage changed it, their weights, stiffness and rest
@@ -282,18 +297,26 @@ class SheetBending:
         unless ``keep_stiffness``: a copy of the same mesh). Patches are made at reset
         only; after it a patch lives on while its neighbourhood is what it was."""
         vertex_count = positions.shape[0]
-        self.quads = hinge_quads(triangles, vertex_count)
+        # a fold leaves the triangles as they were (most changes in a squeeze): the hinges,
+        # and the pieces the patches stand on, are the previous mesh's
+        same_triangles = previous is not None \
+            and previous._material.shape[0] == vertex_count \
+            and np.array_equal(previous._triangles, triangles)
+        self.quads = previous.quads if same_triangles else hinge_quads(triangles, vertex_count)
         count = self.quads.shape[0]
         self.folded = find_sorted(
             edge_key(self.quads[:, 2], self.quads[:, 3], vertex_count),
             np.sort(edge_key(fold_pairs[:, 0], fold_pairs[:, 1], vertex_count)))[1]
-        self.weights = np.empty((count, 4))
-        self.stiffness = np.empty(count)
-        self.rest_curvature = np.empty((count, 3))
-        hinge_rest_state(positions, self.quads, rigidity, self.weights, self.stiffness,
-                         self.rest_curvature)
-        if previous is not None and previous.quads.shape[0] and count:
-            self._carry_over(previous, vertex_count, keep_stiffness)
+        if same_triangles:
+            self._carry_over_hinges(previous, positions, rigidity, keep_stiffness)
+        else:
+            self.weights = np.empty((count, 4))
+            self.stiffness = np.empty(count)
+            self.rest_curvature = np.empty((count, 3))
+            hinge_rest_state(positions, self.quads, rigidity, self.weights, self.stiffness,
+                             self.rest_curvature)
+            if previous is not None and previous.quads.shape[0] and count:
+                self._carry_over(previous, vertex_count, keep_stiffness)
         # a fold is a hinge that gave way: its AUX spring holds it (SPEC §4.2), it no
         # longer bends back
         self.stiffness[self.folded] = 0.0
@@ -302,12 +325,18 @@ class SheetBending:
         self._triangles = triangles
         self._material = np.asarray(material, dtype=np.float64)
         self._rigidity = rigidity
-        self._build_patches(positions, fold_pairs, previous)
+        self._previous_patch = None
+        """Where each patch was in ``previous``'s arrays, if made from it on the same
+        triangles (matrix_change)."""
+        self._geometry = previous._geometry if same_triangles else self._mesh_geometry()
+        """What _cover needs of the triangles alone: each one's key and corners' Voronoi
+        areas, and the keys of each hinge's two triangles."""
+        self._build_patches(positions, fold_pairs, previous, same_triangles)
         self._cover()
 
     _PATCH_ARRAYS = ('stencil', 'rows', 'tangents', 'is_cell', 'patch_rest', 'yielding')
 
-    def _build_patches(self, positions, fold_pairs, previous) -> None:
+    def _build_patches(self, positions, fold_pairs, previous, same_triangles: bool) -> None:
         vertex_count = positions.shape[0]
         if previous is None:
             self.stencil, self.rows, self.tangents, self.is_cell = patches.grid_patches(
@@ -321,9 +350,13 @@ class SheetBending:
             # yielded
             for name in self._PATCH_ARRAYS:
                 setattr(self, name, getattr(previous, name))
-            self._keep_patches(patches.patches_standing(self.stencil, self.is_cell,
-                                                        self._triangles, vertex_count)
-                               & ~self.yielding)
+            standing = ~self.yielding
+            if not same_triangles:  # (on the same triangles, every patch still stands)
+                standing &= patches.patches_standing(self.stencil, self.is_cell,
+                                                     self._triangles, vertex_count)
+            self._keep_patches(standing)
+            if same_triangles:
+                self._previous_patch = np.flatnonzero(standing)
         if fold_pairs.shape[0]:  # a fold or a crease in a patch: damage's, not a plate's
             self._keep_patches(~patches.patches_tying(self.stencil, fold_pairs.astype(np.int64),
                                                       vertex_count))
@@ -331,6 +364,15 @@ class SheetBending:
     def _keep_patches(self, kept: np.ndarray) -> None:
         for name in self._PATCH_ARRAYS:
             setattr(self, name, getattr(self, name)[kept])
+        if self._previous_patch is not None:
+            self._previous_patch = self._previous_patch[kept]
+
+    def _mesh_geometry(self) -> tuple:
+        triangles, vertex_count = self._triangles, self._material.shape[0]
+        return (patches.triangle_keys(triangles, vertex_count),
+                patches.voronoi_areas(self._material, triangles),
+                tuple(patches.triangle_keys(self.quads[:, half], vertex_count)
+                      for half in ([0, 1, 2], [1, 0, 3])))
 
     def _cover(self) -> None:
         """Who bends which triangle. A triangle is bent by patches where its corners have
@@ -346,9 +388,9 @@ class SheetBending:
         corners = np.concatenate([one, other])
         covered_keys = np.sort(patches.triangle_keys(corners, vertex_count)[
             np.all(has_vertex_patch[corners], axis=1)])
-        keys = patches.triangle_keys(triangles, vertex_count)
+        keys, all_corner_areas, hinge_halves = self._geometry
         covered = find_sorted(keys, covered_keys)[1]
-        corner_area = patches.voronoi_areas(self._material, triangles[covered])
+        corner_area = all_corner_areas[covered]
         vertex_area = np.bincount(triangles[covered].ravel(), weights=corner_area.ravel(),
                                   minlength=vertex_count)
         area = np.zeros(self.stencil.shape[0])
@@ -369,15 +411,33 @@ class SheetBending:
         curvature = np.abs(self.patch_rest[self._patches]).reshape(
             self._patches.size, patches.ROWS * 3).max(axis=1, initial=0.0)
         self._curved_patches = self._patches[curvature > patches.FLAT_REST]
-        uncovered = sum((~find_sorted(patches.triangle_keys(self.quads[:, half],
-                                                            vertex_count),
-                                      covered_keys)[1]).astype(int)
-                        for half in ([0, 1, 2], [1, 0, 3]))
+        uncovered = sum((~find_sorted(half, covered_keys)[1]).astype(int)
+                        for half in hinge_halves)
         self.hinge_share = 0.5 * uncovered
         self._hinge_stiffness = self.stiffness * self.hinge_share
         self._curved = np.flatnonzero(
             (np.abs(self.rest_curvature).max(axis=1, initial=0.0) > FLAT_REST)
             & (self._hinge_stiffness > 0.0))
+
+    def _carry_over_hinges(self, previous: 'SheetBending', positions: np.ndarray,
+                           rigidity: float, keep_stiffness: bool) -> None:
+        """The hinges of the same triangles: each keeps its state but those whose fold
+        state changed, which are measured now (what _carry_over gives them, at the cost of
+        those few)."""
+        self.weights = previous.weights.copy()
+        self.stiffness = previous.stiffness.copy()
+        self.rest_curvature = previous.rest_curvature.copy()
+        changed = np.flatnonzero(previous.folded != self.folded)
+        if changed.size:
+            weights = np.empty((changed.size, 4))
+            stiffness = np.empty(changed.size)
+            rest_curvature = np.empty((changed.size, 3))
+            hinge_rest_state(positions, self.quads[changed], rigidity, weights, stiffness,
+                             rest_curvature)
+            self.weights[changed] = weights
+            self.stiffness[changed] = stiffness if keep_stiffness \
+                else stiffness * CREASE_STIFFNESS_SHARE
+            self.rest_curvature[changed] = rest_curvature
 
     def _carry_over(self, previous: 'SheetBending', vertex_count: int,
                     keep_stiffness: bool) -> None:
@@ -399,19 +459,34 @@ class SheetBending:
     def matrix_entries(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rows, columns, values) [N/m] of Q = Σ k w wᵀ over the hinges and Σ w c cᵀ over
         the patches' rows."""
-        rows = np.repeat(self.quads, 4, axis=1).ravel()
-        columns = np.tile(self.quads, (1, 4)).ravel()
-        values = (self._hinge_stiffness[:, None, None] * self.weights[:, :, None]
-                  * self.weights[:, None, :]).ravel()
-        stencil = self.stencil[self._patches]
-        vertex = np.where(stencil >= 0, stencil, stencil[:, :1])  # padding: 0 coefficients
-        coefficients = self.rows[self._patches]  # (P, ROWS, K)
-        patch_values = np.einsum('p,pka,pkb->pab', self.patch_weight[self._patches],
-                                 coefficients, coefficients)
-        width = vertex.shape[1]
-        return (np.concatenate([rows, np.repeat(vertex, width, axis=1).ravel()]),
-                np.concatenate([columns, np.tile(vertex, (1, width)).ravel()]),
-                np.concatenate([values, patch_values.ravel()]))
+        return _bending_entries(self.quads, self.weights, self._hinge_stiffness,
+                                self.stencil[self._patches], self.rows[self._patches],
+                                self.patch_weight[self._patches])
+
+    def matrix_change(self, previous: 'SheetBending'
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Q less ``previous``'s Q, (rows, columns, values) [N/m], from the few hinges and
+        patches that changed (a fold's): what assembling both and comparing them finds, at
+        the cost of those few. None unless this bending was made from ``previous`` on the
+        same triangles."""
+        if self._previous_patch is None or previous.quads is not self.quads:
+            return None
+        hinges = np.flatnonzero((self._hinge_stiffness != previous._hinge_stiffness)
+                                | np.any(self.weights != previous.weights, axis=1))
+        kept = self._previous_patch
+        reweighted = np.flatnonzero(self.patch_weight != previous.patch_weight[kept])
+        dropped = np.ones(previous.stencil.shape[0], dtype=bool)
+        dropped[kept] = False
+        dropped &= previous.patch_weight > 0.0
+        new = _bending_entries(self.quads[hinges], self.weights[hinges],
+                               self._hinge_stiffness[hinges], self.stencil[reweighted],
+                               self.rows[reweighted], self.patch_weight[reweighted])
+        old_patches = np.concatenate([kept[reweighted], np.flatnonzero(dropped)])
+        old = _bending_entries(previous.quads[hinges], previous.weights[hinges],
+                               -previous._hinge_stiffness[hinges],
+                               previous.stencil[old_patches], previous.rows[old_patches],
+                               -previous.patch_weight[old_patches])
+        return tuple(np.concatenate([a, b]) for a, b in zip(new, old))
 
     def add_targets(self, positions: np.ndarray, rhs: np.ndarray) -> None:
         """The local step's bending part of the global step's right-hand side."""

@@ -301,10 +301,49 @@ class UpdatedStep:
         return cls(base, system, pinned, added_diagonal, touched, change,
                    previous if isinstance(previous, UpdatedStep) else None)
 
+    @classmethod
+    def changed_by(cls, previous: 'GlobalStep | UpdatedStep',
+                   change: tuple[np.ndarray, np.ndarray, np.ndarray],
+                   pinned: np.ndarray) -> 'GlobalStep | UpdatedStep | None':
+        """``previous``'s system plus ``change`` (rows, columns, values [N/m] on the same
+        vertices: a fold's few terms), answered by its factor: what ``of`` finds from the
+        whole new system, without assembling it and comparing it with the factored one.
+        None where ``of`` would give None."""
+        count = previous.system.shape[0]
+        if previous.stale or pinned.size != count \
+                or not np.array_equal(pinned, previous.pinned_mask):
+            return None
+        rows, columns, values = change
+        system = (previous.system + sparse.coo_matrix(
+            (values, (rows, columns)), shape=(count, count)).tocsr()).tocsr()
+        # the change on T since the factor: the previous update's and this one's
+        updated = isinstance(previous, UpdatedStep)
+        known = previous._touched if updated else np.zeros(0, dtype=np.int64)
+        union = np.union1d(known, np.concatenate([rows, columns])).astype(np.int64)
+        at = np.searchsorted(union, known)
+        total = np.zeros((union.size, union.size))
+        if updated:
+            total[np.ix_(at, at)] = previous.change
+        np.add.at(total, (np.searchsorted(union, rows), np.searchsorted(union, columns)),
+                  values)
+        beyond = np.abs(total) > CHANGE_TOLERANCE * np.abs(system.diagonal()).max()
+        keep = beyond.any(axis=0) | beyond.any(axis=1)
+        touched = union[keep]
+        if touched.size > MAX_UPDATE_VERTICES or np.any(pinned[touched]):
+            return None
+        if touched.size == 0 and not updated:
+            return previous  # no change beyond rounding
+        base = previous.base if updated else previous
+        added_diagonal = previous.added_diagonal if updated else np.zeros(0)
+        return cls(base, system, pinned, added_diagonal, touched, total[np.ix_(keep, keep)],
+                   previous if updated else None)
+
     def __init__(self, base: GlobalStep, system: sparse.csr_matrix, pinned: np.ndarray,
                  added_diagonal: np.ndarray, touched: np.ndarray, change: np.ndarray,
                  previous: 'UpdatedStep | None' = None) -> None:
         self.base = base
+        self.change = change
+        """Δ on the touched vertices: the system less the factored one there."""
         self.system = system
         self.pinned_mask = pinned.copy()
         self.free = np.flatnonzero(~pinned).astype(np.int64)

@@ -32,8 +32,8 @@ from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
 from .mesh_editing import spring_lengths
-from .projective import (ConstrainedSolve, global_step, inertial_step, local_targets,
-                         spring_entries)
+from .projective import (ConstrainedSolve, UpdatedStep, global_step, inertial_step,
+                         local_targets, spring_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
 from .topology import two_edge_path_lengths, vertex_normals
 
@@ -118,6 +118,8 @@ class Simulator:
         """Per spring, the length a random crease's memory pulls towards (NaN: none)."""
         self._memory_length = np.zeros(0)
         self._global_step = self._bending_step = None  # factored anew
+        self._factored_settings = None
+        """What the factored systems were built with (_system_settings)."""
         self._probe_from = self._probe_to = np.zeros((0, 3))
         """Where the probes are at the start and the end of the current sub-step."""
         self._free_probes = np.zeros(0, dtype=bool)
@@ -191,6 +193,10 @@ class Simulator:
         constraint sweep order, the long-range attachments and the global step's factor."""
         sheet = self.sheet
         self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
+        # a fold changes a few terms of each system, known without assembling them (not
+        # when vertices were added, or the systems' settings changed)
+        known_change = sheet.vertex_count == self._grip_probe.shape[0] \
+            and self._factored_settings == self._system_settings()
         # damage only appends vertices: the grips of the old ones stand
         added = sheet.vertex_count - self._grip_probe.shape[0]
         self._grip_probe = np.concatenate([self._grip_probe, np.full(added, -1)])
@@ -198,12 +204,14 @@ class Simulator:
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
         if self.config.solver.method != 'constrained':
             self._global_step = self._bending_step = None
+            self._factored_settings = None
             self._constraint_springs = np.zeros(0, dtype=np.int64)
             self._near_pin_count = 0
             self._build_attachments()
             return
         kind = sheet.spring_kind
         held = (kind == HINGE) | (kind == AUX)
+        spring_change = self._held_change(held) if known_change else None
         constraint_springs = np.flatnonzero(held)
         # sweep from the pins outwards, so that one forward sweep carries their hold far
         ends = sheet.spring_vertices[constraint_springs]
@@ -234,14 +242,41 @@ class Simulator:
             sheet.spring_rest_length[hinge], sheet.vertex_count)
         self._held_rest = sheet.spring_rest_length[held_springs]
         self._global_weight = np.full(held_springs.size, self.config.solver.global_stiffness)
+        previous_bending = self._bending
         self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
                                      self.config.sheet.bending_rigidity,
-                                     sheet.spring_vertices[kind == AUX], self._bending)
-        self._factor_global_steps()
+                                     sheet.spring_vertices[kind == AUX], previous_bending)
+        # the bending factored is the previous one's unless patches yielded since
+        bending_change = self._bending.matrix_change(previous_bending) \
+            if known_change and not previous_bending.matrix_changed else None
+        self._factor_global_steps(changes=(spring_change, bending_change))
 
-    def _factor_global_steps(self, springs: bool = True) -> None:
+    def _system_settings(self) -> tuple:
+        """What the two systems depend on besides the mesh, masses and pins."""
+        return (self.config.solver.dt / self.config.solver.substeps,
+                self.config.solver.global_stiffness, self.config.sheet.bending_rigidity)
+
+    def _held_change(self, held: np.ndarray) -> tuple | None:
+        """The springs' K less the factored one, (rows, columns, values) [N/m], where the
+        held springs of the last rebuild kept their vertices (a fold, which holds one spring
+        more) and ``held`` marks the held springs now; else None."""
+        sheet = self.sheet
+        if not np.array_equal(sheet.spring_vertices[self._held_springs], self._held_ends):
+            return None
+        was_held = np.zeros(held.size, dtype=bool)
+        was_held[self._held_springs] = True
+        ends = np.concatenate([sheet.spring_vertices[held & ~was_held],
+                               sheet.spring_vertices[was_held & ~held]])
+        weight = np.full(ends.shape[0], self.config.solver.global_stiffness)
+        weight[np.count_nonzero(held & ~was_held):] *= -1.0
+        return spring_entries(ends, weight)
+
+    def _factor_global_steps(self, springs: bool = True, changes: tuple = (None, None)
+                             ) -> None:
         """Factor the bending's system and (``springs``) the springs', the pinned vertices
-        held (what the probes hold changes every sub-step: ConstrainedSolve holds it)."""
+        held (what the probes hold changes every sub-step: ConstrainedSolve holds it).
+        ``changes``: each system's change since its factor where it is known (a fold's:
+        _held_change, SheetBending.matrix_change), which spares assembling it anew."""
         sheet = self.sheet
         h = self.config.solver.dt / self.config.solver.substeps
         pinned = sheet.pinned
@@ -251,18 +286,22 @@ class Simulator:
             self._global_step = self._bending_step = None
             return
         # a small change (a break, a fold) reuses the last factors (projective.UpdatedStep)
+        spring_change, bending_change = changes
+        self._factored_settings = self._system_settings()
         previous_bending = self._bending_step.step if self._bending_step else None
         self._bending_factored_at = self.frame
         self._bending_step = ConstrainedSolve(
-            global_step(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h,
-                        previous_bending),
+            _changed_step(previous_bending, bending_change, pinned)
+            or global_step(sheet.vertex_mass, pinned, self._bending.matrix_entries(), h,
+                           previous_bending),
             sheet.vertex_count)
         if springs or self._global_step is None:
             previous_springs = self._global_step.step if self._global_step else None
             self._global_step = ConstrainedSolve(
-                global_step(sheet.vertex_mass, pinned,
-                            spring_entries(self._held_ends, self._global_weight), h,
-                            previous_springs),
+                _changed_step(previous_springs, spring_change, pinned)
+                or global_step(sheet.vertex_mass, pinned,
+                               spring_entries(self._held_ends, self._global_weight), h,
+                               previous_springs),
                 sheet.vertex_count)
 
     def _build_attachments(self) -> None:
@@ -1063,3 +1102,10 @@ def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.n
             return level
         current += 1
         level[frontier] = current
+
+
+def _changed_step(previous, change, pinned: np.ndarray):
+    """``previous`` updated by a known ``change`` (UpdatedStep.changed_by), or None."""
+    if previous is None or change is None:
+        return None
+    return UpdatedStep.changed_by(previous, change, pinned)
