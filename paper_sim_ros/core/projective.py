@@ -78,6 +78,10 @@ def _solve_factored(pointer, index, value, diagonal, permutation, coupling_point
         z0 = work[column, 0]
         z1 = work[column, 1]
         z2 = work[column, 2]
+        if z0 == 0.0 and z1 == 0.0 and z2 == 0.0:
+            # nothing to carry: a unit right-hand side (unit_responses) reaches only the
+            # columns on its elimination-tree path, a few hundred of thousands
+            continue
         for p in range(pointer[column], pointer[column + 1]):
             row = index[p]
             entry = value[p]
