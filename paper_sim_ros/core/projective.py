@@ -185,57 +185,6 @@ def spring_entries(spring_vertices: np.ndarray,
             np.concatenate([weight, weight, -weight, -weight]))
 
 
-def term_entries(terms: tuple[np.ndarray, np.ndarray, np.ndarray]
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rows, columns, values) of Σ c v vᵀ over rank-one ``terms`` = (vertices (T, W),
-    values (T, W), coefficients (T,)); a zero value pads a term to the width W."""
-    vertices, values, coefficients = terms
-    width = vertices.shape[1]
-    return (np.repeat(vertices, width, axis=1).ravel(), np.tile(vertices, (1, width)).ravel(),
-            (coefficients[:, None, None] * values[:, :, None] * values[:, None, :]).ravel())
-
-
-@njit(cache=True)
-def _rank_one_updates(pointer, index, value, diagonal, rows, entries, coefficients, work):
-    """L D Lᵀ += c v vᵀ for each term in turn (an update where c > 0, a downdate where
-    c < 0: Gill, Golub, Murray & Saunders 1974, method C1), only along the elimination-tree
-    path from the term's first row (Davis & Hager 1999), the pattern as it is. ``rows``:
-    each term's rows in the factor's order. False where a term reaches a row off that path
-    (the pattern lacks an entry it needs) or D would turn non-positive: the arrays are then
-    spoilt, so they are copies."""
-    for t in range(coefficients.shape[0]):
-        alpha = coefficients[t]
-        if alpha == 0.0:
-            continue
-        j = rows[t, 0]
-        for k in range(rows.shape[1]):
-            work[rows[t, k]] += entries[t, k]
-            j = min(j, rows[t, k])
-        while True:
-            p = work[j]
-            work[j] = 0.0
-            d = diagonal[j]
-            new_d = d + alpha * p * p
-            if not new_d > 0.0:
-                return False
-            beta = p * alpha / new_d
-            alpha = alpha * d / new_d
-            diagonal[j] = new_d
-            first = pointer[j]
-            last = pointer[j + 1]
-            for q in range(first, last):
-                r = index[q]
-                work[r] -= p * value[q]
-                value[q] += beta * work[r]
-            if first == last:
-                break
-            j = index[first]  # the parent: rows are sorted
-        for k in range(rows.shape[1]):  # a row off the path kept its entry
-            if work[rows[t, k]] != 0.0:
-                return False
-    return True
-
-
 class GlobalStep:
     """The prefactored system M/h² + K of one mesh, pin set and sub-step length: the
     springs' global step (K = Σ k AᵀA) or the bending step (K = Q, core/bending.py)."""
@@ -272,37 +221,6 @@ class GlobalStep:
         self.stale = False
         """A factor is never stale (UpdatedStep.stale)."""
         self._work = np.zeros((self.free.size, 3))
-
-    def updated(self, terms: tuple[np.ndarray, np.ndarray, np.ndarray],
-                pinned: np.ndarray) -> 'GlobalStep | None':
-        """This step for its system plus Σ c v vᵀ (rank-one ``terms``, term_entries: a
-        fold's), its factor updated instead of made anew (_rank_one_updates): a few
-        milliseconds where a factor takes tens, and the solves stay a factor's. None where
-        the pins changed, a term holds a pinned vertex, or one needs an entry the factor's
-        pattern lacks (UpdatedStep then answers)."""
-        if not np.array_equal(pinned, self.pinned_mask):
-            return None
-        vertices, values, coefficients = terms
-        position = np.full(pinned.size, -1, dtype=np.int64)
-        pointer, index, value, diagonal, permutation = self._factors
-        position[self.free] = permutation
-        rows = position[vertices]
-        if np.any(rows < 0):
-            return None
-        # updates before downdates: every matrix on the way is then positive definite
-        order = np.argsort(-coefficients, kind='stable')
-        value, diagonal = value.copy(), diagonal.copy()
-        if not _rank_one_updates(pointer, index, value, diagonal, rows[order], values[order],
-                                 coefficients[order], np.zeros(diagonal.size)):
-            return None
-        step = GlobalStep.__new__(GlobalStep)
-        step.__dict__.update(self.__dict__)
-        entry_rows, entry_columns, entries = term_entries(terms)
-        step.system = (self.system + sparse.coo_matrix(
-            (entries, (entry_rows, entry_columns)), shape=self.system.shape).tocsr()).tocsr()
-        step._factors = (pointer, index, value, diagonal, permutation)
-        step._work = np.zeros_like(self._work)
-        return step
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray) -> None:
         """Overwrite the free vertices of ``positions`` with the global step's solution."""
