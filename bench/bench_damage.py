@@ -5,6 +5,7 @@ Fig. 12–13 in numbers.
     .venv/bin/python bench/bench_damage.py fragility --grid 33 --phi 0.5 1 2 4 8
     .venv/bin/python bench/bench_damage.py psi --grid 33 --psi 0 0.25 0.5 1 1.5
     .venv/bin/python bench/bench_damage.py substeps --grid 33 65
+    .venv/bin/python bench/bench_damage.py drift --grid 65 129
 
 cost: the built-in 'squeeze' stepped with damage on and off; ms per frame for the whole
 step, and the part spent in damage (the check, the mesh surgery and the solver's rebuild
@@ -12,7 +13,9 @@ after a change); mesh changes, and the rebuild's ms per change (factor updates a
 refactors they pay for, or a refactor each change). fragility: squeeze breaks and folds
 per φ. psi: the 'crumple' scenario with breaks only (no folds), mean ridge height of the
 creases and the relaxed deviation per ψ. substeps: squeeze breaks and relaxed deviation at
-1, 2 and 4 sub-steps.
+1, 2 and 4 sub-steps. drift: the squeeze with every factor updated in place checked
+against its own system (a known x solved for): how many changes were taken in place, how
+many left to the Woodbury update, the worst forward error, the most terms a factor took.
 """
 from __future__ import annotations
 
@@ -22,6 +25,8 @@ import sys
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
+
+import numpy as np  # noqa: E402
 
 from paper_sim_ros.core import build_simulator, projective, relaxed_deviation  # noqa: E402
 from paper_sim_ros.core.metrics import ridge_heights  # noqa: E402
@@ -76,11 +81,13 @@ def cost(grids: list[int]) -> None:
     print('| grid | damage | ms/frame | of which damage | mesh changes | ms per change '
           '| breaks | folds | vertices |')
     print('|---|---|---|---|---|---|---|---|---|')
-    update_limit = projective.MAX_UPDATE_VERTICES
+    update_limit, in_place = projective.MAX_UPDATE_VERTICES, projective.GlobalStep.updated
     for grid in grids:
         for enabled, updates in ((False, True), (True, True), (True, False)):
-            # without updates, every mesh change factors both systems afresh
+            # without updates (in place or by Woodbury), every mesh change factors both
+            # systems afresh
             projective.MAX_UPDATE_VERTICES = update_limit if updates else 0
+            projective.GlobalStep.updated = in_place if updates else lambda *args: None
             simulator, frames, total, damage, changes, rebuilt = run(
                 'squeeze', grid, {'enabled': enabled})
             label = 'on' if updates else 'on, refactor each change'
@@ -88,7 +95,7 @@ def cost(grids: list[int]) -> None:
                   f'| {1e3 * damage / frames:.2f} | {changes} '
                   f'| {1e3 * rebuilt / max(changes, 1):.1f} | {simulator.breaks} '
                   f'| {simulator.folds} | {simulator.sheet.vertex_count} |')
-    projective.MAX_UPDATE_VERTICES = update_limit
+    projective.MAX_UPDATE_VERTICES, projective.GlobalStep.updated = update_limit, in_place
 
 
 def fragility(grids: list[int], phis: list[float]) -> None:
@@ -125,9 +132,40 @@ def substeps(grids: list[int]) -> None:
                   f'| {1e3 * relaxed_deviation(simulator):.2f} |')
 
 
+def drift(grids: list[int]) -> None:
+    print('| grid | in place | left to Woodbury | worst forward error | most terms a factor '
+          'took | breaks | folds |')
+    print('|---|---|---|---|---|---|---|')
+    in_place = projective.GlobalStep.updated
+    for grid in grids:
+        counts = {'in place': 0, 'left': 0, 'error': 0.0, 'terms': 0}
+
+        def checked(step, terms, pinned):
+            updated = in_place(step, terms, pinned)
+            if updated is None:
+                counts['left'] += 1
+                return None
+            known = np.random.default_rng(1).standard_normal((pinned.size, 3))
+            known[pinned] = 0.0
+            solved = np.zeros_like(known)
+            updated.solve(updated.system @ known, solved)
+            counts['in place'] += 1
+            counts['error'] = max(counts['error'], float(np.abs(solved - known).max()))
+            counts['terms'] = max(counts['terms'], updated.terms_taken)
+            return updated
+
+        projective.GlobalStep.updated = checked
+        try:
+            simulator, *_ = run('squeeze', grid, {})
+        finally:
+            projective.GlobalStep.updated = in_place
+        print(f"| {grid} | {counts['in place']} | {counts['left']} | {counts['error']:.1e} "
+              f"| {counts['terms']} | {simulator.breaks} | {simulator.folds} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('what', choices=('cost', 'fragility', 'psi', 'substeps'))
+    parser.add_argument('what', choices=('cost', 'fragility', 'psi', 'substeps', 'drift'))
     parser.add_argument('--grid', type=int, nargs='+', default=[33])
     parser.add_argument('--phi', type=float, nargs='+', default=[0.5, 1.0, 2.0, 4.0, 8.0])
     parser.add_argument('--psi', type=float, nargs='+', default=[0.0, 0.25, 0.5, 1.0, 1.5])
@@ -138,8 +176,10 @@ def main() -> None:
         fragility(args.grid, args.phi)
     elif args.what == 'psi':
         psi(args.grid, args.psi)
-    else:
+    elif args.what == 'substeps':
         substeps(args.grid)
+    else:
+        drift(args.grid)
 
 
 if __name__ == '__main__':

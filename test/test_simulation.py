@@ -483,8 +483,10 @@ def test_damage_updates_the_factors_exactly():
 def test_a_fold_updates_the_factors_from_its_own_terms(monkeypatch):
     """A fold leaves the triangles as they were: the springs' system gains one held spring
     and the bending's loses a hinge and the patches across it. Those terms alone update
-    the factors (UpdatedStep.changed_by), without assembling either system anew, and the
-    solves are what a new factor of the folded mesh gives, to round-off."""
+    the factors (in place, GlobalStep.updated, where the factor's pattern holds them; else
+    UpdatedStep.changed_by), without assembling either system anew, and the solves are
+    what a new factor of the folded mesh gives, to round-off."""
+    from paper_sim_ros.core.projective import GlobalStep
     mapping = with_overrides(builtin_mapping('hanging'), grid=17, seed=2)
     mapping['damage'] = {'crumple_fold_fraction': 1.0}
     scenario = scenario_from_mapping(mapping)
@@ -495,15 +497,59 @@ def test_a_fold_updates_the_factors_from_its_own_terms(monkeypatch):
     monkeypatch.setattr(simulator_module, 'global_step',
                         lambda *args: assembled.append(1) or original(*args))
     rng = np.random.default_rng(3)
-    from_terms = 0
+    from_terms = in_place = 0
     for event in range(6):
         folds, calls = simulator.folds, len(assembled)
+        bending_before = simulator._bending_step.step
         simulator.crumple(1, seed=event)
         assert simulator.folds == folds + 1 and simulator.breaks == 0
         assert_steps_solve_as_new_factors(simulator, h, rng)
         # (a factor is renewed once the folds since it touch too many vertices)
         from_terms += len(assembled) == calls
+        bending = simulator._bending_step.step
+        in_place += len(assembled) == calls and isinstance(bending, GlobalStep) \
+            and bending is not bending_before
     assert from_terms >= 4, 'the folds assembled the systems anew'
+    assert in_place >= 4, 'the bending factor was not updated in place'
+
+
+def test_a_factor_updated_in_place_solves_its_system_or_declines():
+    """GlobalStep.updated: a spring added or removed between any two vertices either
+    updates the factor in place, which then solves the changed system as a new factor
+    does, or, where the factor's pattern lacks an entry the update needs (two vertices it
+    does not couple), declines (None), leaving the change to UpdatedStep. Pairs far apart
+    on the sheet need fill; a first version took some of them (the second vertex on the
+    first's elimination path) and left the factor silently wrong."""
+    from paper_sim_ros.core.projective import GlobalStep, spring_entries
+    sheet = build_flat_sheet(SheetConfig(nx=13, ny=13))
+    pinned = np.zeros(sheet.vertex_count, dtype=bool)
+    pinned[:13] = True
+    h = 1.0 / 60.0
+    weight = np.full(sheet.spring_count, 600.0)
+    step = GlobalStep(sheet.vertex_mass, pinned, spring_entries(sheet.spring_vertices, weight),
+                      h)
+    rng = np.random.default_rng(0)
+    free = np.flatnonzero(~pinned)
+    known = rng.normal(size=(sheet.vertex_count, 3))
+    known[pinned] = 0.0
+    taken = declined = 0
+    for _ in range(300):
+        ends = rng.choice(free, size=2, replace=False)
+        sign = rng.choice([-1.0, 1.0]) if np.any(
+            (sheet.spring_vertices == ends).all(axis=1)) else 1.0
+        updated = step.updated((ends[None, :], np.array([[1.0, -1.0]]),
+                                np.array([sign * 300.0])), pinned)
+        if updated is None:
+            declined += 1
+            continue
+        taken += 1
+        solved = np.zeros_like(known)
+        updated.solve(updated.system @ known, solved)
+        np.testing.assert_allclose(solved, known, rtol=0, atol=1e-9)
+        expected = step.system.toarray()
+        expected[np.ix_(ends, ends)] += sign * 300.0 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+        np.testing.assert_allclose(updated.system.toarray(), expected, rtol=0, atol=1e-9)
+    assert taken >= 5 and declined >= 100, (taken, declined)
 
 
 def test_constrained_solve_equals_a_factor_with_the_vertices_held():

@@ -279,6 +279,30 @@ def _bending_entries(quads, weights, hinge_stiffness, stencil, coefficients, pat
             np.concatenate([values, patch_values.ravel()]))
 
 
+def _hinge_terms(quads, weights, stiffness) -> tuple:
+    """Each hinge's k w wᵀ as a rank-one term (projective.term_entries)."""
+    return quads.astype(np.int64), weights, stiffness
+
+
+def _patch_terms(stencil, coefficients, weight) -> tuple:
+    """Each patch row's w c cᵀ as a rank-one term; the stencil's padding (-1) becomes its
+    centre with a zero coefficient."""
+    vertex = np.where(stencil >= 0, stencil, stencil[:, :1]).astype(np.int64)
+    rows = coefficients.shape[1]
+    return (np.repeat(vertex, rows, axis=0), coefficients.reshape(-1, coefficients.shape[2]),
+            np.repeat(weight, rows))
+
+
+def _widened(terms: tuple, width: int) -> tuple:
+    """``terms`` padded to ``width`` entries each (the first vertex, a zero value)."""
+    vertices, values, coefficients = terms
+    pad = width - vertices.shape[1]
+    if pad == 0:
+        return terms
+    return (np.concatenate([vertices, np.repeat(vertices[:, :1], pad, axis=1)], axis=1),
+            np.concatenate([values, np.zeros((values.shape[0], pad))], axis=1), coefficients)
+
+
 class SheetBending:
     """The bending state of one mesh: vertex patches where the sheet is intact
     (core/patches.py), hinges where damage changed it, their weights, stiffness and rest
@@ -465,10 +489,11 @@ class SheetBending:
 
     def matrix_change(self, previous: 'SheetBending'
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Q less ``previous``'s Q, (rows, columns, values) [N/m], from the few hinges and
-        patches that changed (a fold's): what assembling both and comparing them finds, at
-        the cost of those few. None unless this bending was made from ``previous`` on the
-        same triangles."""
+        """Q less ``previous``'s Q as rank-one terms (vertices (T, W), values (T, W),
+        coefficients (T,) [N/m]: projective.term_entries) from the few hinges and patches
+        that changed (a fold's): each changed hinge's k w wᵀ out and in again, each patch
+        row's w c cᵀ for a changed or dropped patch. None unless this bending was made from
+        ``previous`` on the same triangles."""
         if self._previous_patch is None or previous.quads is not self.quads:
             return None
         hinges = np.flatnonzero((self._hinge_stiffness != previous._hinge_stiffness)
@@ -478,15 +503,18 @@ class SheetBending:
         dropped = np.ones(previous.stencil.shape[0], dtype=bool)
         dropped[kept] = False
         dropped &= previous.patch_weight > 0.0
-        new = _bending_entries(self.quads[hinges], self.weights[hinges],
-                               self._hinge_stiffness[hinges], self.stencil[reweighted],
-                               self.rows[reweighted], self.patch_weight[reweighted])
         old_patches = np.concatenate([kept[reweighted], np.flatnonzero(dropped)])
-        old = _bending_entries(previous.quads[hinges], previous.weights[hinges],
-                               -previous._hinge_stiffness[hinges],
-                               previous.stencil[old_patches], previous.rows[old_patches],
-                               -previous.patch_weight[old_patches])
-        return tuple(np.concatenate([a, b]) for a, b in zip(new, old))
+        parts = [_hinge_terms(self.quads[hinges], self.weights[hinges],
+                              self._hinge_stiffness[hinges]),
+                 _hinge_terms(previous.quads[hinges], previous.weights[hinges],
+                              -previous._hinge_stiffness[hinges]),
+                 _patch_terms(self.stencil[reweighted], self.rows[reweighted],
+                              self.patch_weight[reweighted]),
+                 _patch_terms(previous.stencil[old_patches], previous.rows[old_patches],
+                              -previous.patch_weight[old_patches])]
+        width = max(part[0].shape[1] for part in parts)
+        return tuple(np.concatenate([_widened(part, width)[k] for part in parts])
+                     for k in range(3))
 
     def add_targets(self, positions: np.ndarray, rhs: np.ndarray) -> None:
         """The local step's bending part of the global step's right-hand side."""

@@ -32,8 +32,8 @@ from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
 from .mesh_editing import spring_lengths
-from .projective import (ConstrainedSolve, UpdatedStep, global_step, inertial_step,
-                         local_targets, spring_entries)
+from .projective import (ConstrainedSolve, GlobalStep, UpdatedStep, global_step,
+                         inertial_step, local_targets, spring_entries, term_entries)
 from .sheet import AUX, HINGE, Sheet, build_flat_sheet, damage_labels
 from .topology import two_edge_path_lengths, vertex_normals
 
@@ -257,19 +257,20 @@ class Simulator:
                 self.config.solver.global_stiffness, self.config.sheet.bending_rigidity)
 
     def _held_change(self, held: np.ndarray) -> tuple | None:
-        """The springs' K less the factored one, (rows, columns, values) [N/m], where the
-        held springs of the last rebuild kept their vertices (a fold, which holds one spring
-        more) and ``held`` marks the held springs now; else None."""
+        """The springs' K less the factored one as rank-one terms (projective.term_entries:
+        k (e_i − e_j)(e_i − e_j)ᵀ per spring), where the held springs of the last rebuild
+        kept their vertices (a fold, which holds one spring more) and ``held`` marks the
+        held springs now; else None."""
         sheet = self.sheet
         if not np.array_equal(sheet.spring_vertices[self._held_springs], self._held_ends):
             return None
         was_held = np.zeros(held.size, dtype=bool)
         was_held[self._held_springs] = True
-        ends = np.concatenate([sheet.spring_vertices[held & ~was_held],
-                               sheet.spring_vertices[was_held & ~held]])
+        gained, lost = held & ~was_held, was_held & ~held
+        ends = np.concatenate([sheet.spring_vertices[gained], sheet.spring_vertices[lost]])
         weight = np.full(ends.shape[0], self.config.solver.global_stiffness)
-        weight[np.count_nonzero(held & ~was_held):] *= -1.0
-        return spring_entries(ends, weight)
+        weight[np.count_nonzero(gained):] *= -1.0
+        return ends.astype(np.int64), np.tile([1.0, -1.0], (ends.shape[0], 1)), weight
 
     def _factor_global_steps(self, springs: bool = True, changes: tuple = (None, None)
                              ) -> None:
@@ -1105,7 +1106,13 @@ def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.n
 
 
 def _changed_step(previous, change, pinned: np.ndarray):
-    """``previous`` updated by a known ``change`` (UpdatedStep.changed_by), or None."""
+    """``previous`` for its system plus a known ``change`` (rank-one terms): its factor
+    updated (GlobalStep.updated), else answered by it (UpdatedStep.changed_by); None if
+    neither can."""
     if previous is None or change is None:
         return None
-    return UpdatedStep.changed_by(previous, change, pinned)
+    if isinstance(previous, GlobalStep):
+        step = previous.updated(change, pinned)
+        if step is not None:
+            return step
+    return UpdatedStep.changed_by(previous, term_entries(change), pinned)
