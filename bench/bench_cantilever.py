@@ -2,7 +2,7 @@
 under its own weight; its tip angle against the elastica of a self-weighted cantilever.
 
     .venv/bin/python bench/bench_cantilever.py [--overhangs 0.06 0.1 0.15 0.2]
-        [--spacings 0.0025 0.005 0.01] [--width 0.02]
+        [--spacings 0.0025 0.005 0.01] [--width 0.02] [--length-projection]
 
 The strip (default office paper: B = 4e-4 N·m, 80 g/m²) is clamped by its first two rows of
 vertices (one pinned row is a hinge, not a clamp), released flat and left to settle with air
@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import time
 
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 
@@ -39,27 +40,33 @@ def elastica_tip_angle(load: float) -> float:
     return shoot(root_curvature)[1]
 
 
-def drooped_tip_angle(overhang: float, spacing: float, width: float) -> tuple[float, dict]:
-    """The simulated strip's tip angle [rad] and its sheet settings."""
+def drooped_tip_angle(overhang: float, spacing: float, width: float,
+                      length_projection: bool = False) -> tuple[float, dict]:
+    """The simulated strip's tip angle [rad], its sheet settings, its fastest vertex at the
+    end [m/s] and the seconds the stepping took."""
     rows = int(round(overhang / spacing)) + 2  # the clamp's two rows, then the overhang
     columns = max(3, int(round(width / spacing)) + 1)
     scenario = load_scenario({
         'name': 'cantilever', 'duration': 4.0, 'pin': 'none',
         'sheet': {'width': width, 'height': (rows - 1) * spacing, 'nx': columns, 'ny': rows,
                   'elevation': 0.5},
-        'solver': {'air_damping': 6.0}, 'contact': {'ground_enabled': False},
+        'solver': {'air_damping': 6.0, 'length_projection': length_projection},
+        'contact': {'ground_enabled': False},
         'damage': {'enabled': False}})
     simulator = build_simulator(scenario)
     along = simulator.sheet.material[:, 1]
     simulator.set_pinned(along <= along.min() + 1.01 * spacing)
+    started = time.perf_counter()
     for _ in range(scenario.frame_count):
         simulator.step_frame()
+    seconds = time.perf_counter() - started
     grid = simulator.sheet.positions.reshape(rows, columns, 3)
     tip = grid[-1].mean(axis=0) - grid[-2].mean(axis=0)
     sheet = scenario.config.sheet
     return math.atan2(-tip[2], tip[1]), {
         'rigidity': sheet.bending_rigidity, 'grammage': sheet.grammage,
-        'speed': float(np.linalg.norm(simulator.sheet.velocities, axis=1).max())}
+        'speed': float(np.linalg.norm(simulator.sheet.velocities, axis=1).max()),
+        'seconds': seconds}
 
 
 def main() -> None:
@@ -67,12 +74,17 @@ def main() -> None:
     parser.add_argument('--overhangs', type=float, nargs='+', default=[0.06, 0.1, 0.15, 0.2])
     parser.add_argument('--spacings', type=float, nargs='+', default=[0.0025, 0.005, 0.01])
     parser.add_argument('--width', type=float, default=0.02)
+    parser.add_argument('--length-projection', action='store_true',
+                        help='solver.length_projection on (core/length_projection.py)')
     args = parser.parse_args()
-    print('| overhang | spacing | elastica tip angle | simulated | ratio | max speed at 4 s |')
-    print('|---|---|---|---|---|---|')
+    drooped_tip_angle(0.02, 0.01, args.width, args.length_projection)  # numba compiled
+    print('| overhang | spacing | elastica tip angle | simulated | ratio | max speed at 4 s '
+          '| s to step 4 s |')
+    print('|---|---|---|---|---|---|---|')
     for overhang in args.overhangs:
         for spacing in args.spacings:
-            angle, sheet = drooped_tip_angle(overhang, spacing, args.width)
+            angle, sheet = drooped_tip_angle(overhang, spacing, args.width,
+                                             args.length_projection)
             # the strip is flat between its two pinned rows: its slope is zero at their
             # midpoint, where the discrete cantilever starts
             span = overhang + 0.5 * spacing
@@ -80,7 +92,8 @@ def main() -> None:
             reference = elastica_tip_angle(load)
             print(f'| {1e3 * overhang:.0f} mm | {1e3 * spacing:.1f} mm '
                   f'| {math.degrees(reference):.2f}° | {math.degrees(angle):.2f}° '
-                  f'| {angle / reference:.3f} | {1e3 * sheet["speed"]:.2f} mm/s |', flush=True)
+                  f'| {angle / reference:.3f} | {1e3 * sheet["speed"]:.2f} mm/s '
+                  f'| {sheet["seconds"]:.2f} |', flush=True)
 
 
 if __name__ == '__main__':

@@ -171,6 +171,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "After a frame of free motion (no probe, off the table, nothing yielded "
                   "or broke), give back the energy the step lost beyond air drag "
                   "('constrained'; one sub-step then swings as many do)."),
+    ParameterSpec('solver.length_projection', _SOLVER.length_projection,
+                  "Project the held springs onto the strain band between the bending solve "
+                  "and the springs' iterations ('constrained'; bending right at large "
+                  'deflections, several times slower).'),
     ParameterSpec('contact.ground_enabled', True, 'A table (ground plane) under the sheet.'),
     ParameterSpec('contact.ground_height', 0.0, 'Height of the table [m].', (-100.0, 100.0)),
     ParameterSpec('contact.ground_friction', _CONTACT.ground_friction,

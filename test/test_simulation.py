@@ -293,7 +293,8 @@ def test_absurd_sheet_parameters_are_refused(field, value):
                                           ('projective_max_iterations', -1),
                                           ('buckling_compression', 0.0),
                                           ('buckling_compression', float('nan')),
-                                          ('energy_restoring', 1), ('air_density', -1.0),
+                                          ('energy_restoring', 1), ('length_projection', 'yes'),
+                                          ('air_density', -1.0),
                                           ('drag_coefficient', float('inf'))])
 def test_absurd_solver_parameters_are_refused(field, value):
     with pytest.raises(ValueError, match=field):

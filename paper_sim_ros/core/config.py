@@ -122,6 +122,13 @@ class SolverConfig:
     paper's own solvers keep its model, ``air_damping`` alone.)"""
     gravity: tuple = (0.0, 0.0, -9.81)
     """Gravity [m/s²]."""
+    length_projection: bool = False
+    """('constrained') Between the bending solve and the springs' iterations, project the
+    held springs onto the strain band by Newton steps on their lengths
+    (core/length_projection.py, Goldenthal et al. 2007): a drooping strip then settles at
+    the elastica's tip angle at large deflections too (within 2 % up to 72°, where it is
+    8–14 % short without), at a cost (docs/solver.md). Off by default: it makes a hanging
+    sheet several times slower, and its swing strains more (1.1 % against 0.35 %, 65²)."""
     energy_restoring: bool = False
     """('constrained') After a frame in which nothing but gravity, air and the pins acted
     and nothing yielded or broke, give back the energy the step lost beyond air drag by
@@ -155,6 +162,8 @@ class SolverConfig:
                  f'gravity must be three finite numbers, got {self.gravity!r}')
         _require(isinstance(self.energy_restoring, bool),
                  f'energy_restoring must be a bool, got {self.energy_restoring!r}')
+        _require(isinstance(self.length_projection, bool),
+                 f'length_projection must be a bool, got {self.length_projection!r}')
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from .bending import SheetBending
 from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
+from .length_projection import project_lengths
 from .mesh_editing import spring_lengths
 from .projective import (ConstrainedSolve, GlobalStep, UpdatedStep, global_step,
                          inertial_step, local_targets, spring_entries, term_entries)
@@ -688,6 +689,12 @@ class Simulator:
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         self._bending.add_targets(positions, weighted_inertia)
         self._bending_solve(weighted_inertia, positions, inertia_weight[:, 0])
+        if solver.length_projection and self._constraint_springs.size:
+            # the edges turn towards their lengths before the iterations rebuild the sheet
+            # from their directions (docs/solver.md, "The cantilever")
+            project_lengths(positions, np.where(self._grip_probe >= 0, 0.0, self._inverse_mass),
+                            self._constraint_ends, self._constraint_rest,
+                            1.0 - solver.max_compression, 1.0 + solver.max_stretch)
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         # springs: the iterations, from where bending left the sheet
         for _ in range(iterations):
