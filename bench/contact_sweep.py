@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/contact_sweep.py [--scenarios press drag ...] [--grids 33 65]
         [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4] [--energy-restoring]
+        [--length-projection]
 
 Per run: max HINGE strain over the run, deepest vertex inside a probe and below the table
 (beyond a pressed probe's dimple), breaks, folds, relaxed deviation, mesh validity, mass
@@ -30,11 +31,13 @@ from paper_sim_ros.core.scenarios import (BUILTIN_SCENARIOS, builtin_mapping,  #
 
 
 def measure(name: str, grid: int, seed: int, damage: bool, substeps: int | None,
-            energy_restoring: bool = False) -> dict:
+            solver_options: tuple[str, ...] = ()) -> dict:
+    """One run; ``solver_options``: the solver's switches turned on (e.g.
+    'energy_restoring')."""
     mapping = with_overrides(builtin_mapping(name), grid=grid, seed=seed,
                              damage_enabled=damage, substeps=substeps)
-    if energy_restoring:
-        mapping['solver'] = {**(mapping.get('solver') or {}), 'energy_restoring': True}
+    mapping['solver'] = {**(mapping.get('solver') or {}),
+                         **{option: True for option in solver_options}}
     scenario = load_scenario(mapping)
     simulator = build_simulator(scenario)
     mass = simulator.sheet.vertex_mass
@@ -81,8 +84,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="sub-steps per frame (default: each scenario's own)")
     parser.add_argument('--energy-restoring', action='store_true',
                         help='solver.energy_restoring on (docs/solver.md)')
+    parser.add_argument('--length-projection', action='store_true',
+                        help='solver.length_projection on (docs/solver.md)')
     args = parser.parse_args(argv)
-    runs = [(name, grid, seed, not args.no_damage, args.substeps, args.energy_restoring)
+    switches = tuple(option for option in ('energy_restoring', 'length_projection')
+                     if getattr(args, option))
+    runs = [(name, grid, seed, not args.no_damage, args.substeps, switches)
             for name in args.scenarios for grid in args.grids for seed in args.seeds]
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:
