@@ -35,6 +35,7 @@ import numpy as np
 from numba import njit
 
 from . import patches
+from .projective import term_entries
 from .topology import edge_key, find_sorted
 
 FLAT_REST = 1e-9
@@ -266,12 +267,10 @@ def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_cur
 
 def _bending_entries(quads, weights, hinge_stiffness, stencil, coefficients, patch_weight
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(rows, columns, values) of Σ k w wᵀ over hinges and Σ w c cᵀ over patches' rows."""
-    rows = np.repeat(quads, 4, axis=1).ravel()
-    columns = np.tile(quads, (1, 4)).ravel()
-    values = (hinge_stiffness[:, None, None] * weights[:, :, None]
-              * weights[:, None, :]).ravel()
-    vertex = np.where(stencil >= 0, stencil, stencil[:, :1])  # padding: 0 coefficients
+    """(rows, columns, values) of Σ k w wᵀ over hinges and Σ w c cᵀ over patches' rows (a
+    patch's rows summed into one block before they are listed)."""
+    rows, columns, values = term_entries(_hinge_terms(quads, weights, hinge_stiffness))
+    vertex = _patch_vertices(stencil)
     patch_values = np.einsum('p,pka,pkb->pab', patch_weight, coefficients, coefficients)
     width = vertex.shape[1]
     return (np.concatenate([rows, np.repeat(vertex, width, axis=1).ravel()]),
@@ -284,13 +283,17 @@ def _hinge_terms(quads, weights, stiffness) -> tuple:
     return quads.astype(np.int64), weights, stiffness
 
 
+def _patch_vertices(stencil: np.ndarray) -> np.ndarray:
+    """A patch stencil's vertices, its padding (-1) replaced by its centre (whose
+    coefficients there are 0)."""
+    return np.where(stencil >= 0, stencil, stencil[:, :1]).astype(np.int64)
+
+
 def _patch_terms(stencil, coefficients, weight) -> tuple:
-    """Each patch row's w c cᵀ as a rank-one term; the stencil's padding (-1) becomes its
-    centre with a zero coefficient."""
-    vertex = np.where(stencil >= 0, stencil, stencil[:, :1]).astype(np.int64)
+    """Each patch row's w c cᵀ as a rank-one term."""
     rows = coefficients.shape[1]
-    return (np.repeat(vertex, rows, axis=0), coefficients.reshape(-1, coefficients.shape[2]),
-            np.repeat(weight, rows))
+    return (np.repeat(_patch_vertices(stencil), rows, axis=0),
+            coefficients.reshape(-1, coefficients.shape[2]), np.repeat(weight, rows))
 
 
 def _widened(terms: tuple, width: int) -> tuple:

@@ -33,9 +33,8 @@ edge is active is over-constrained, and at 2.5 mm cells the unregularised steps 
 
 
 @njit(cache=True)
-def _schur_product(count, active, ends, directions, inverse_mass, weights, x, out, gathered):
-    """out = (J W Jᵀ + COMPLIANCE diag(J W Jᵀ)) x over the ``count`` active springs;
-    ``gathered`` is left holding Jᵀ x per vertex."""
+def _transposed_product(count, active, ends, directions, x, gathered):
+    """``gathered`` = Jᵀ x per vertex over the ``count`` active springs."""
     gathered[:, :] = 0.0
     for a in range(count):
         i = ends[active[a], 0]
@@ -43,6 +42,12 @@ def _schur_product(count, active, ends, directions, inverse_mass, weights, x, ou
         for axis in range(3):
             gathered[j, axis] += directions[a, axis] * x[a]
             gathered[i, axis] -= directions[a, axis] * x[a]
+
+
+@njit(cache=True)
+def _schur_product(count, active, ends, directions, inverse_mass, weights, x, out, gathered):
+    """out = (J W Jᵀ + COMPLIANCE diag(J W Jᵀ)) x over the ``count`` active springs."""
+    _transposed_product(count, active, ends, directions, x, gathered)
     for a in range(count):
         i = ends[active[a], 0]
         j = ends[active[a], 1]
@@ -141,8 +146,7 @@ def project_lengths(positions, inverse_mass, ends, rest_length, shortest, longes
             for a in range(count):
                 search[a] = preconditioned[a] + beta * search[a]
         # x −= W Jᵀ λ
-        _schur_product(count, active, ends, directions, inverse_mass, weights, multiplier,
-                       product, gathered)
+        _transposed_product(count, active, ends, directions, multiplier, gathered)
         for v in range(positions.shape[0]):
             for axis in range(3):
                 positions[v, axis] -= inverse_mass[v] * gathered[v, axis]

@@ -323,8 +323,8 @@ class GlobalStep:
         step = GlobalStep.__new__(GlobalStep)
         step.__dict__.update(self.__dict__)
         entry_rows, entry_columns, entries = term_entries(terms)
-        step.system = (self.system + sparse.coo_matrix(
-            (entries, (entry_rows, entry_columns)), shape=self.system.shape).tocsr()).tocsr()
+        step.system = self.system + sparse.coo_matrix(
+            (entries, (entry_rows, entry_columns)), shape=self.system.shape).tocsr()
         step._factors = (pointer, index, value, diagonal, permutation)
         step._work = np.zeros_like(self._work)
         step.terms_taken = self.terms_taken + np.count_nonzero(coefficients)
