@@ -504,15 +504,21 @@ def _spring_strain(positions, spring_vertices, rest_length, s):
 
 
 @njit(cache=True)
-def squeezed_excess(positions, spring_vertices, rest_length, compression_threshold):
-    """What ``projective.local_targets`` returns, Σ max(0, 1 − l/l0 − compression_threshold),
-    without its right-hand side: the check that most sub-steps end the buckling iterations
-    with (a sheet not squeezed), at half a local step's cost."""
-    excess = 0.0
+def any_squeezed(positions, spring_vertices, rest_length, compression_threshold):
+    """Whether a spring is shorter than (1 − ``compression_threshold``) × its rest length:
+    the check that most sub-steps end the buckling iterations with (a sheet not squeezed).
+    On squared lengths, and it stops at the first such spring (129², hanging: 0.11 against
+    0.26 ms for the sum of the excess it replaced)."""
     for s in range(spring_vertices.shape[0]):
-        excess += max(0.0, -_spring_strain(positions, spring_vertices, rest_length, s)
-                      - compression_threshold)
-    return excess
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        shortest = (1.0 - compression_threshold) * rest_length[s]
+        if dx * dx + dy * dy + dz * dz < shortest * shortest:
+            return True
+    return False
 
 
 @njit(cache=True)

@@ -710,8 +710,8 @@ class Simulator:
         crumpled sheet stays compressed where it cannot buckle any further). Why they run
         on both sides of the bending solve, with figures: docs/solver.md."""
         buckling_compression = self.config.solver.buckling_compression
-        if most <= 0 or kernels.squeezed_excess(positions, self._held_ends, self._held_rest,
-                                                buckling_compression) == 0.0:
+        if most <= 0 or not kernels.any_squeezed(positions, self._held_ends, self._held_rest,
+                                                 buckling_compression):
             return  # not squeezed (most sub-steps): no local step's right-hand side needed
         excess = np.inf
         for _ in range(most):
