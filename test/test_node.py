@@ -249,6 +249,7 @@ def test_a_flood_of_poses_does_not_stall_the_node(sim):
     reset(sim)
     hover = pose(sim, (0.0, 0.0, 0.3))
     since = time.monotonic()
+    flood_started = time.time()  # the node stamps /diagnostics with the system clock
     sent = 0
     end = since + 2.5
     while time.monotonic() < end:
@@ -262,8 +263,13 @@ def test_a_flood_of_poses_does_not_stall_the_node(sim):
     rate = len(clouds) / flood_seconds
     assert rate > 0.5 * RATES['publish_rate'], f'clouds at {rate:.1f} Hz under the flood'
     assert_finite_outputs(sim, since)
+    # by when the node published them, not when this harness, spinning one callback per 50
+    # poses, got round to them (once in 32 runs a report said no probe was active; one
+    # from before the flood took hold, read late, is the likely cause)
     reports = [{pair.key: pair.value for pair in array.status[0].values}
-               for array in sim.messages('/diagnostics', since + 0.6)]
+               for array in sim.messages('/diagnostics', since)
+               if array.header.stamp.sec + 1e-9 * array.header.stamp.nanosec
+               >= flood_started + 0.6]
     assert reports, 'no diagnostics during the flood'
     assert all(int(values['active_probes']) == 1 for values in reports), \
         'the latest pose of the flood is not in use'
