@@ -227,6 +227,43 @@ def test_a_fingertip_pressing_the_sheet_onto_the_table_carries_it_along():
     assert np.median(slid_over) < 0.005, 'a slippery fingertip slides over the sheet'
 
 
+def _wide_pad_drag(frames: int) -> Simulator:
+    """``drag`` at 33² with a 4 cm pad: it grips some 85 vertices, 255 rows."""
+    mapping = with_overrides(builtin_mapping('drag'), grid=33)
+    mapping['damage'] = {'enabled': False}
+    mapping['probes'][0]['radius'] = 0.04
+    drag = scenario_from_mapping(mapping)
+    simulator = build_simulator(drag)
+    for frame in range(frames):
+        simulator.set_probes(*drag.probe_inputs((frame + 1) * drag.config.solver.dt))
+        simulator.step_frame()
+    return simulator
+
+
+@pytest.mark.parametrize('frames', [100, 170])
+def test_a_wide_pad_holds_its_grip_as_pins_of_the_factor(frames, monkeypatch):
+    """A pad that grips more than GRIP_ROWS_MOST rows' worth holds its footprint as pins of
+    the factored systems instead of as constraint rows (whose dense system costs the cube
+    of their count: a squeeze with 4 cm fingertips at 65² took over 300 s for 4 s), and
+    lets them go at lift-off. The answer is the rows' (measured: 3e-14 m apart while
+    dragging, 4e-13 m after lift-off)."""
+    as_pins = _wide_pad_drag(frames)
+    held = np.count_nonzero(as_pins._grip_pinned)
+    if frames == 100:  # dragging
+        assert 3 * held > simulator_module.GRIP_ROWS_MOST, held
+        assert as_pins._global_step.step.free.size \
+            == as_pins.sheet.vertex_count - held - np.count_nonzero(as_pins.sheet.pinned)
+    else:  # lifted off: the factor holds nothing the pad let go
+        assert held == 0 and not np.any(as_pins._grip_probe >= 0)
+        assert as_pins._global_step.step.free.size == as_pins.sheet.vertex_count
+    monkeypatch.setattr(simulator_module, 'GRIP_ROWS_MOST', 10 ** 9)
+    as_rows = _wide_pad_drag(frames)
+    assert not np.any(as_rows._grip_pinned)
+    np.testing.assert_allclose(as_pins.sheet.positions, as_rows.sheet.positions, rtol=0,
+                               atol=1e-9)
+    assert as_pins.max_strain() < 0.005
+
+
 @pytest.mark.parametrize('substeps', [1, 4])
 def test_squeeze_arches_the_sheet_between_the_fingertips(substeps):
     """Two fingertips carry the sheet's ends 44.55 mm inwards each; paper does not shorten,

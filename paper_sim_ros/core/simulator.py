@@ -65,6 +65,11 @@ FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
 GRIP_ROW, CONTACT_ROW = 0, 1
 """Kinds of the solves' constraint rows (Simulator._set_contact_rows)."""
+GRIP_ROWS_MOST = 192
+"""Rows (three a vertex) that hold gripped vertices in the solves, at most: beyond, the
+gripped vertices are pins of the factored systems (Simulator._factor_grips). The rows' dense
+system costs the cube of their count whenever they change: a wide pad pressed flat onto a
+1 400-vertex sheet gripped all of it and took 30 s a frame."""
 SPIN_NONE, SPIN_VERTICAL, SPIN_ALL = 0, 1, 2
 """Which angular momentum a sub-step keeps (Simulator._spin_kept): none, the vertical
 component, all of it."""
@@ -112,6 +117,10 @@ class Simulator:
         self.nan_seen = False
         self.probes = Probes()
         self._release_grips()
+        self._grip_pinned = np.zeros(self.sheet.vertex_count, dtype=bool)
+        """The vertices the factored systems hold as pins because a probe grips them
+        (_factor_grips): kept when the grips are let go, until the systems are factored
+        without them."""
         self._table_reaction = np.zeros(self.sheet.vertex_count)
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
         self._bending = None  # rest angles from the initial sheet
@@ -202,6 +211,7 @@ class Simulator:
         added = sheet.vertex_count - self._grip_probe.shape[0]
         self._grip_probe = np.concatenate([self._grip_probe, np.full(added, -1)])
         self._grip_offset = np.concatenate([self._grip_offset, np.zeros((added, 3))])
+        self._grip_pinned = np.concatenate([self._grip_pinned, np.zeros(added, dtype=bool)])
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
         if self.config.solver.method != 'constrained':
             self._global_step = self._bending_step = None
@@ -276,12 +286,13 @@ class Simulator:
     def _factor_global_steps(self, springs: bool = True, changes: tuple = (None, None)
                              ) -> None:
         """Factor the bending's system and (``springs``) the springs', the pinned vertices
-        held (what the probes hold changes every sub-step: ConstrainedSolve holds it).
+        held, and the gripped ones _factor_grips pins (what the probes hold changes every
+        sub-step: ConstrainedSolve holds it).
         ``changes``: each system's change since its factor where it is known (a fold's:
         _held_change, SheetBending.matrix_change), which spares assembling it anew."""
         sheet = self.sheet
         h = self.config.solver.dt / self.config.solver.substeps
-        pinned = sheet.pinned
+        pinned = sheet.pinned | self._grip_pinned
         self._table_reaction[pinned] = 0.0  # held vertices are not the solve's to support
         self._bending.matrix_changed = False
         if not np.any(~pinned):
@@ -751,7 +762,7 @@ class Simulator:
         start), when more than TABLE_ROWS_MOST vertices are on the table."""
         ground = self.config.contact.ground_height
         vertex, direction, value = self._rows
-        eligible = ~self.sheet.pinned
+        eligible = ~(self.sheet.pinned | self._grip_pinned)
         eligible[vertex] = False  # a probe's row decides its vertex
         held = np.flatnonzero(eligible & (self._table_reaction > 0.0))
         # the rows' columns are bought once per factor: worth it where the factor stands
@@ -859,6 +870,7 @@ class Simulator:
         row, so the sheet slides over the probe instead of being dragged through itself)."""
         sheet = self.sheet
         self._probe_from, self._probe_to = probe_from, probe_to
+        self._factor_grips()
         if not self.probes.count:  # nothing to hold (nor gripped: grips need a probe)
             self._rows, self._row_kind = NO_ROWS, NO_ROWS[0]
             return
@@ -870,11 +882,11 @@ class Simulator:
         self._free_probes = self.probes.active & ~(
             table.ground_enabled & (probe_to[:, 2] - self.probes.radius < table.ground_height)) \
             & (probe_to[:, 2] <= probe_from[:, 2])
-        gripped = np.flatnonzero(self._grip_probe >= 0)
+        gripped = np.flatnonzero((self._grip_probe >= 0) & ~self._grip_pinned)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
         self._contact(positions, start_positions, probe_from, probe_to, True, touched,
                       table_friction=False)
-        touched[gripped] = False
+        touched[self._grip_probe >= 0] = False
         touched[sheet.pinned] = False
         contact = np.flatnonzero(touched)
         normal, _ = self._contact_planes(positions, contact, probe_to)
@@ -1008,6 +1020,21 @@ class Simulator:
     def _release_grips(self) -> None:
         self._grip_probe = np.full(self.sheet.vertex_count, -1)
         self._grip_offset = np.zeros((self.sheet.vertex_count, 3))
+
+    def _factor_grips(self) -> None:
+        """Where a probe grips more vertices than GRIP_ROWS_MOST rows can hold, factor the
+        systems anew with the gripped vertices pinned (they are placed where their probe
+        carries them before the solves, as pins are where they were), and again when one of
+        them is let go: a wide pad holds its footprint for one factorisation per change of
+        its grip, not the cube of its rows per solve."""
+        gripped = self._grip_probe >= 0
+        pinned = self._grip_pinned
+        if not (np.any(pinned & ~gripped)
+                or 3 * np.count_nonzero(gripped & ~pinned) > GRIP_ROWS_MOST):
+            return
+        self._grip_pinned = gripped if 3 * np.count_nonzero(gripped) > GRIP_ROWS_MOST \
+            else np.zeros_like(gripped)
+        self._factor_global_steps()
 
     # ------------------------------------------------------------------------- damage
     def crumple(self, count: int, seed: int) -> None:
