@@ -123,6 +123,10 @@ class Simulator:
         without them."""
         self._table_reaction = np.zeros(self.sheet.vertex_count)
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
+        self._rest_shape = self.sheet.positions.copy()
+        """Where each vertex lay when its rest was last set (the sheet as built, a crumple's
+        plastic shape, a new vertex where damage made it): how far from a pin the sheet
+        reaches at rest (_build_attachments)."""
         self._bending = None  # rest angles from the initial sheet
         self._memory_target = np.zeros(0)
         """Per spring, the length a random crease's memory pulls towards (NaN: none)."""
@@ -213,6 +217,8 @@ class Simulator:
         self._grip_offset = np.concatenate([self._grip_offset, np.zeros((added, 3))])
         self._grip_pinned = np.concatenate([self._grip_pinned, np.zeros(added, dtype=bool)])
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
+        self._rest_shape = np.concatenate([self._rest_shape, sheet.positions[-added:]
+                                           if added else np.zeros((0, 3))])
         if self.config.solver.method != 'constrained':
             self._global_step = self._bending_step = None
             self._factored_settings = None
@@ -335,6 +341,11 @@ class Simulator:
             best = np.argmin(gap, axis=1)
             nearest[start:start + 4096] = anchors[best]
             distance[start:start + 4096] = gap[np.arange(chunk.size), best]
+        # at least as far as the rest shape reaches: a crumple's plastic set lengthens the
+        # paper's path from the pins (held to the flat sheet's distance, a spring from a pin
+        # rested 27 % compressed, a 41 x 31 sheet crumpled 292 times)
+        reach = np.linalg.norm(self._rest_shape[free] - self._rest_shape[nearest], axis=1)
+        np.maximum(distance, reach, out=distance)
         self._attached = free
         self._anchor = nearest
         self._attachment_length = distance * (1.0 + self.config.solver.max_stretch)
@@ -1041,6 +1052,9 @@ class Simulator:
         """Random damage (SPEC §4.3): ``count`` random breaks and folds, seeded."""
         self.damage.crumple(self.sheet, count, seed)
         self.topology_changed()
+        # the crumpled shape is the sheet's rest (damage._take_shape_as_rest)
+        self._rest_shape = self.sheet.positions.copy()
+        self._build_attachments()
         if self.config.solver.method != 'constrained':
             return  # springs that are forces: the memories pull as Eq. 6 has them
         self._bending.take_shape(self.sheet.positions, self.damage.moved_by_crumple)
