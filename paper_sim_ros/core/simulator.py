@@ -216,6 +216,7 @@ class Simulator:
         self._grip_probe = np.concatenate([self._grip_probe, np.full(added, -1)])
         self._grip_offset = np.concatenate([self._grip_offset, np.zeros((added, 3))])
         self._grip_pinned = np.concatenate([self._grip_pinned, np.zeros(added, dtype=bool)])
+        self._slipping = np.concatenate([self._slipping, np.zeros(added, dtype=bool)])
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
         self._rest_shape = np.concatenate([self._rest_shape, sheet.positions[-added:]
                                            if added else np.zeros((0, 3))])
@@ -1018,19 +1019,72 @@ class Simulator:
         if not (self.probes.count and contact.ground_enabled
                 and contact.probe_friction > contact.ground_friction):
             self._grip_probe[:] = -1
+            self._slipping[:] = False
             return
         pressing = self.probes.active & (probe_to[:, 2] - self.probes.radius
                                          < contact.ground_height)
         kernels.hold_gripped(positions, probe_to, pressing, self._grip_probe,
                              self._grip_offset, contact.ground_height)
-        kernels.grip_pinched(positions, self._inverse_mass, probe_to, self.probes.radius,
-                             pressing, contact.ground_height, self._grip_probe,
-                             self._grip_offset)
+        self._slip_grips(positions)
+        if np.any(self._slipping):  # out from under a pressing probe, it can be gripped again
+            slipping = np.flatnonzero(self._slipping)
+            gap = np.linalg.norm(positions[slipping, None, :] - probe_to[None], axis=2)
+            under = (gap <= 1.02 * self.probes.radius[None]) & pressing[None]
+            self._slipping[slipping[~np.any(under, axis=1)]] = False
+        kernels.grip_pinched(positions, np.where(self._slipping, 0.0, self._inverse_mass),
+                             probe_to, self.probes.radius, pressing, contact.ground_height,
+                             self._grip_probe, self._grip_offset)
         touched |= self._grip_probe >= 0
 
     def _release_grips(self) -> None:
         self._grip_probe = np.full(self.sheet.vertex_count, -1)
         self._grip_offset = np.zeros((self.sheet.vertex_count, 3))
+        self._slipping = np.zeros(self.sheet.vertex_count, dtype=bool)
+        """Vertices that slipped out of a grip (_slip_grips): not gripped again while a
+        pressing probe still holds them against the table."""
+
+    def _slip_grips(self, positions) -> None:
+        """A fingertip holds paper by friction, and paper gives long before it stretches: where
+        the grips have carried two gripped vertices farther apart than the paper between them
+        reaches at rest, one grip slips. Against a pin, the fingertip's (a vertex beyond its
+        long-range attachment's length lets go); between two fingertips, the one gripping
+        fewer vertices, the weaker (all its vertices too far from the other's let go, and
+        slide under it). The test is on where the probes put their gripped vertices, not on
+        what the solve left of the springs around them, so solver error never lets go: a
+        squeeze's fingertips (coming together) and one fingertip dragging a free sheet keep
+        their grip. Held rigidly, two fingertips moving apart or one dragging a sheet pinned
+        elsewhere stretched it by up to 19 times its length (`bench/random_scenes.py`)."""
+        gripped = np.flatnonzero(self._grip_probe >= 0)
+        if gripped.size == 0:
+            return
+        letting_go = np.zeros(gripped.size, dtype=bool)
+        stretch = 1.0 + self.config.solver.max_stretch
+        if self._attached.size:
+            attachment = np.searchsorted(self._attached, gripped)
+            anchor = self._anchor[attachment]
+            letting_go |= np.linalg.norm(positions[gripped] - positions[anchor], axis=1) \
+                > self._attachment_length[attachment]
+        probe = self._grip_probe[gripped]
+        holding = np.unique(probe)
+        sheet = self.sheet
+        for first in range(holding.size):
+            for second in range(first + 1, holding.size):
+                ours = gripped[probe == holding[first]]
+                theirs = gripped[probe == holding[second]]
+                if ours.size > theirs.size:  # the weaker grip slips (ties: the later probe)
+                    ours, theirs = theirs, ours
+                elif ours.size == theirs.size:
+                    ours, theirs = theirs, ours
+                reach = np.maximum(
+                    np.linalg.norm(sheet.material[ours, None] - sheet.material[None, theirs],
+                                   axis=2),
+                    np.linalg.norm(self._rest_shape[ours, None] - self._rest_shape[None, theirs],
+                                   axis=2))
+                apart = np.linalg.norm(positions[ours, None] - positions[None, theirs], axis=2)
+                letting_go[np.isin(gripped, ours[np.any(apart > stretch * reach, axis=1)])] = True
+        slipped = gripped[letting_go]
+        self._grip_probe[slipped] = -1
+        self._slipping[slipped] = True
 
     def _factor_grips(self) -> None:
         """Where a probe grips more vertices than GRIP_ROWS_MOST rows can hold, factor the
