@@ -1104,7 +1104,9 @@ class Simulator:
     # ------------------------------------------------------------------------- damage
     def crumple(self, count: int, seed: int) -> None:
         """Random damage (SPEC §4.3): ``count`` random breaks and folds, seeded."""
-        self.damage.crumple(self.sheet, count, seed)
+        contact = self.config.contact
+        self.damage.crumple(self.sheet, count, seed,
+                            contact.ground_height if contact.ground_enabled else -math.inf)
         self.topology_changed()
         # the crumpled shape is the sheet's rest (damage._take_shape_as_rest)
         self._rest_shape = self.sheet.positions.copy()
