@@ -318,8 +318,11 @@ def test_an_interrupted_batch_resumes_with_only_its_unfinished_runs(reference, t
     pid_dir.mkdir()
     # each run holds 2 s at its start (the test hook), so the batch is caught half-way
     env = {**ray_env, 'TMPDIR': str(tmp_path), TEST_PID_DIR_ENV: str(pid_dir)}
+    # SIGINT as a terminal sends it, even where the tests run in a background job (which
+    # ignores it, and a child Python started so would never see it)
     batch = subprocess.Popen(dataset_command(spec, out, '--workers', '1'), env=env,
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         # three runs recorded (a run's folder is complete a moment before the driver records
         # it; the next run then holds 2 s at its start, so nothing finishes meanwhile)

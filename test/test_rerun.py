@@ -319,9 +319,12 @@ def test_headless_interrupted_recording_is_complete_and_replayable(tmp_path, sig
     scenario_file = tmp_path / 'long_pinch.yaml'
     scenario_file.write_text(yaml.safe_dump({**PINCH, 'duration': 600.0}))
     path = tmp_path / 'interrupted.rrd'
+    # SIGINT as a terminal sends it, even where the tests run in a background job (which
+    # ignores it, and a child Python started so would never see it)
     process = subprocess.Popen(
         [sys.executable, '-m', 'paper_sim_ros.headless', '--scenario', str(scenario_file),
-         '--rrd', str(path)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+         '--rrd', str(path)], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         _wait_for_frames(path, process, 20)
         process.send_signal(signal_number)
