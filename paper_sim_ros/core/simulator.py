@@ -218,8 +218,8 @@ class Simulator:
         self._grip_pinned = np.concatenate([self._grip_pinned, np.zeros(added, dtype=bool)])
         self._slipping = np.concatenate([self._slipping, np.zeros(added, dtype=bool)])
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
-        self._rest_shape = np.concatenate([self._rest_shape, sheet.positions[-added:]
-                                           if added else np.zeros((0, 3))])
+        self._rest_shape = np.concatenate([self._rest_shape,
+                                           sheet.positions[sheet.vertex_count - added:]])
         if self.config.solver.method != 'constrained':
             self._global_step = self._bending_step = None
             self._factored_settings = None
@@ -334,22 +334,26 @@ class Simulator:
             self._attachment_length = np.zeros(0)
             return
         nearest = np.empty(free.size, dtype=np.int64)
-        distance = np.empty(free.size)
         anchor_material = sheet.material[anchors]
         for start in range(0, free.size, 4096):
             chunk = free[start:start + 4096]
             gap = np.linalg.norm(sheet.material[chunk, None, :] - anchor_material[None], axis=2)
-            best = np.argmin(gap, axis=1)
-            nearest[start:start + 4096] = anchors[best]
-            distance[start:start + 4096] = gap[np.arange(chunk.size), best]
-        # at least as far as the rest shape reaches: a crumple's plastic set lengthens the
-        # paper's path from the pins (held to the flat sheet's distance, a spring from a pin
-        # rested 27 % compressed, a 41 x 31 sheet crumpled 292 times)
-        reach = np.linalg.norm(self._rest_shape[free] - self._rest_shape[nearest], axis=1)
-        np.maximum(distance, reach, out=distance)
+            nearest[start:start + 4096] = anchors[np.argmin(gap, axis=1)]
         self._attached = free
         self._anchor = nearest
-        self._attachment_length = distance * (1.0 + self.config.solver.max_stretch)
+        self._attachment_length = self._rest_reach(free, nearest) \
+            * (1.0 + self.config.solver.max_stretch)
+
+    def _rest_reach(self, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+        """How far apart vertices ``first`` and ``second`` (index arrays, broadcast) may be
+        at rest [m]: their material distance, or the rest shape's where that is longer (a
+        crumple's plastic set lengthens the paper's path: held to the flat sheet's
+        distance from a pin, a spring by it rested 27 % compressed, a 41 x 31 sheet
+        crumpled 292 times)."""
+        sheet = self.sheet
+        return np.maximum(
+            np.linalg.norm(sheet.material[first] - sheet.material[second], axis=-1),
+            np.linalg.norm(self._rest_shape[first] - self._rest_shape[second], axis=-1))
 
     # ----------------------------------------------------------------------- stepping
     def step_frame(self) -> None:
@@ -1066,20 +1070,13 @@ class Simulator:
                 > self._attachment_length[attachment]
         probe = self._grip_probe[gripped]
         holding = np.unique(probe)
-        sheet = self.sheet
         for first in range(holding.size):
             for second in range(first + 1, holding.size):
                 ours = gripped[probe == holding[first]]
                 theirs = gripped[probe == holding[second]]
-                if ours.size > theirs.size:  # the weaker grip slips (ties: the later probe)
+                if ours.size >= theirs.size:  # the weaker grip slips (ties: the later probe)
                     ours, theirs = theirs, ours
-                elif ours.size == theirs.size:
-                    ours, theirs = theirs, ours
-                reach = np.maximum(
-                    np.linalg.norm(sheet.material[ours, None] - sheet.material[None, theirs],
-                                   axis=2),
-                    np.linalg.norm(self._rest_shape[ours, None] - self._rest_shape[None, theirs],
-                                   axis=2))
+                reach = self._rest_reach(ours[:, None], theirs[None])
                 apart = np.linalg.norm(positions[ours, None] - positions[None, theirs], axis=2)
                 letting_go[np.isin(gripped, ours[np.any(apart > stretch * reach, axis=1)])] = True
         slipped = gripped[letting_go]
@@ -1107,10 +1104,10 @@ class Simulator:
         contact = self.config.contact
         self.damage.crumple(self.sheet, count, seed,
                             contact.ground_height if contact.ground_enabled else -math.inf)
+        # the crumpled shape is the sheet's rest (damage._take_shape_as_rest): the old
+        # vertices' here, the ones it added appended by topology_changed
+        self._rest_shape = self.sheet.positions[:self._rest_shape.shape[0]].copy()
         self.topology_changed()
-        # the crumpled shape is the sheet's rest (damage._take_shape_as_rest)
-        self._rest_shape = self.sheet.positions.copy()
-        self._build_attachments()
         if self.config.solver.method != 'constrained':
             return  # springs that are forces: the memories pull as Eq. 6 has them
         self._bending.take_shape(self.sheet.positions, self.damage.moved_by_crumple)
