@@ -1,6 +1,7 @@
 """Grips that cannot be followed (docs/contact.md, "A grip slips"): a fingertip pulling a
-sheet pinned at its far edge 8 cm away from the pin, and two fingertips moving 4 cm apart
-each, on the `drag` scenario's A4 sheet (no damage).
+sheet pinned at its far edge 8 cm away from the pin, the same fingertip dragged 6 cm along
+the pinned edge (in the sheet's middle, and 3.85 cm from the edge), and two fingertips
+moving 4 cm apart each, on the `drag` scenario's A4 sheet (no damage).
 
     .venv/bin/python bench/grip_slip.py [--grids 33 65] [--substeps 1 4]
 
@@ -22,16 +23,19 @@ from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping
                                           with_overrides)
 
 
-def fingertip(name: str, start_y: float, end_y: float) -> dict:
-    """A 1 cm fingertip that lands at y = ``start_y``, pressed 1 mm into the table, moves to
-    ``end_y`` in 1 s and lifts off."""
+def fingertip(name: str, start_y: float, end_y: float, start_x: float = 0.0,
+              end_x: float = 0.0) -> dict:
+    """A 1 cm fingertip that lands at (``start_x``, ``start_y``), pressed 1 mm into the
+    table, moves to (``end_x``, ``end_y``) in 1 s and lifts off."""
     return {'name': name, 'radius': 0.01, 'keyframes': [
-        [0.0, 0.0, start_y, 0.05], [0.5, 0.0, start_y, 0.009], [1.5, 0.0, end_y, 0.009],
-        [2.0, 0.0, end_y, 0.05]]}
+        [0.0, start_x, start_y, 0.05], [0.5, start_x, start_y, 0.009],
+        [1.5, end_x, end_y, 0.009], [2.0, end_x, end_y, 0.05]]}
 
 
 SCENES = {
     'pinned pull': ('short_edge', [fingertip('finger', 0.0, 0.08)]),
+    'along the pins': ('short_edge', [fingertip('finger', 0.0, 0.0, -0.03, 0.03)]),
+    'along, near them': ('short_edge', [fingertip('finger', -0.11, -0.11, -0.03, 0.03)]),
     'apart': ('none', [fingertip('low', -0.03, -0.07), fingertip('high', 0.03, 0.07)]),
 }
 

@@ -492,6 +492,31 @@ def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, gro
         positions[v, 2] = ground_height
 
 
+@njit(cache=True)
+def beyond_rest_reach(positions, material, rest_shape, vertices, anchors, stretch):
+    """(len(vertices),) bool: whether each of ``vertices`` is farther from any of
+    ``anchors`` than ``stretch`` × the distance the paper between them reaches at rest (the
+    larger of their material and rest-shape distances; paper does not stretch, so no path
+    through it is longer than that from the anchor)."""
+    beyond = np.zeros(vertices.shape[0], dtype=np.bool_)
+    for k in range(vertices.shape[0]):
+        v = vertices[k]
+        for a in anchors:
+            apart = 0.0
+            for axis in range(3):
+                apart += (positions[v, axis] - positions[a, axis]) ** 2
+            flat = 0.0
+            for axis in range(material.shape[1]):
+                flat += (material[v, axis] - material[a, axis]) ** 2
+            shaped = 0.0
+            for axis in range(3):
+                shaped += (rest_shape[v, axis] - rest_shape[a, axis]) ** 2
+            if apart > stretch * stretch * max(flat, shaped):
+                beyond[k] = True
+                break
+    return beyond
+
+
 @njit(cache=True, inline='always')
 def _spring_strain(positions, spring_vertices, rest_length, s):
     """l/l0 − 1 of spring s."""
