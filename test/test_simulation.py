@@ -192,6 +192,32 @@ def test_fast_probe_does_not_tunnel_through_the_sheet():
     assert simulator.max_probe_penetration() < 1e-9
 
 
+def test_a_sheet_springing_back_after_a_fast_poke_is_not_dragged_round_the_probe():
+    """A 17 mm probe pokes a hanging sheet 2 cm deep at 40 cm/s and withdraws at 15 cm/s
+    (random poke scene 38 of bench/random_scenes.py): the sheet springs back faster than the
+    probe goes and touches its back. That part of the sheet chases the probe; carried along
+    as what a fast probe pushes is, it was held apart round the probe's back (15.8 % in
+    every other frame). Measured now: 3.8 % while it withdraws (13 % while it pushes: a
+    fast probe wraps the sheet round its front, README, known limitations)."""
+    poke = scenario_from_mapping({
+        'name': 'withdraw', 'seed': 624, 'duration': 2.2, 'pin': 'short_edge',
+        'sheet': {'width': 0.2113, 'height': 0.236, 'nx': 43, 'ny': 48, 'elevation': 0.418},
+        'damage': {'enabled': False},
+        'probes': [{'name': 'probe', 'radius': 0.0085, 'keyframes': [
+            [1.5, -0.0103, -0.1575, 0.3689], [1.6497, -0.0103, -0.0976, 0.3689],
+            [1.708, -0.0070, -0.0976, 0.3689], [2.108, -0.0103, -0.1575, 0.3689]]}]})
+    simulator = build_simulator(poke)
+    withdrawing = 0.0
+    for frame in range(poke.frame_count):
+        time = (frame + 1) * poke.config.solver.dt
+        simulator.set_probes(*poke.probe_inputs(time))
+        simulator.step_frame()
+        if time > 1.71:
+            withdrawing = max(withdrawing, simulator.max_strain())
+    assert withdrawing < 0.06, withdrawing
+    assert simulator.max_probe_penetration() < 1e-3
+
+
 def _slide_sheet_with_fingertip(probe_friction: float) -> np.ndarray:
     """A 1.5 cm fingertip comes down on the middle of a sheet on a table, presses 3 mm
     into it, slides 45 mm along x in 1 s and stays pressed; the vertices' x travel [m]."""

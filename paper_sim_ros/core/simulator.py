@@ -579,12 +579,14 @@ class Simulator:
         # What a probe pinches on the table goes where the probe goes. What it only touches
         # the solve has already placed on its surface, and the sheet may slide over it,
         # unless the probe moves faster than a quarter radius in the sub-step: then the
-        # sheet is dragged along instead of pulling its patch back through the probe
+        # sheet ahead of it is dragged along instead of pulling its patch back through the
+        # probe
         if self._constraint_springs.size:
             carried = self._grip_probe >= 0
             travel = np.linalg.norm(probe_to - probe_from, axis=1)
             if np.any(self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)):
-                carried |= touched
+                carried |= touched & ~self._chasing_fast_probes(positions, start_positions,
+                                                                probe_from, probe_to)
             inverse_mass = np.where(carried, 0.0, self._inverse_mass)
             # a sheet pushed together on the table can only buckle up; one lying there
             # crumpled is not being pushed (lifting it would keep it moving for ever)
@@ -600,6 +602,25 @@ class Simulator:
         if constrained and spin_kept and spin_kept == self._spin_kept():
             self._keep_angular_momentum(momentum * (1.0 - h * self.config.solver.air_damping),
                                         h, spin_kept == SPIN_VERTICAL)
+
+    def _chasing_fast_probes(self, positions, start_positions, probe_from, probe_to
+                             ) -> np.ndarray:
+        """(V,) bool: the vertices behind a probe that moved more than FAST_PROBE_TRAVEL
+        radii in the sub-step (on the far side of the plane through its centre across its
+        motion) both where it and they started and where they ended. Such a probe moves away
+        from them: if they touch it, the sheet is not pushed but chases it (springing back
+        after a poke, faster than the probe withdraws). Carried along, the vertices it
+        touched were held apart round the probe's back, a spring between them at 14-16 % in
+        every other frame. Vertices that started ahead and ended behind were pushed through,
+        and are carried."""
+        chasing = np.zeros(positions.shape[0], dtype=bool)
+        motion = probe_to - probe_from
+        fast = self.probes.active \
+            & (np.linalg.norm(motion, axis=1) > FAST_PROBE_TRAVEL * self.probes.radius)
+        for probe in np.flatnonzero(fast):
+            chasing |= ((start_positions - probe_from[probe]) @ motion[probe] < 0.0) \
+                & ((positions - probe_to[probe]) @ motion[probe] < 0.0)
+        return chasing
 
     def _air_drag(self, h: float) -> None:
         """The air's pressure drag across the sheet (``drag_coefficient``), on the velocities
@@ -1061,13 +1082,14 @@ class Simulator:
         farther from any pinned vertex than the paper reaches lets go (from its nearest pin
         alone, a fingertip dragged along a pinned edge kept its grip, as the distance to that
         pin grows only to second order, and sheared the sheet 11-73 %). Between two
-        fingertips, the one gripping fewer vertices, the weaker (all its vertices too far from
-        the other's let go, and slide under it). The test is on where the probes put their
-        gripped vertices, not on what the solve left of the springs around them, so solver
-        error never lets go: a squeeze's fingertips (coming together) and one fingertip
-        dragging a free sheet keep their grip. Held rigidly, two fingertips moving apart or
-        one dragging a sheet pinned elsewhere stretched it by up to 19 times its length
-        (`bench/random_scenes.py`)."""
+        fingertips, the one gripping fewer vertices, the weaker. A fingertip that slips
+        slides (``_sliding``): all it grips slides under it, and it grips nothing new until it
+        lifts off. The test is on where the probes put their gripped vertices (before the
+        solves, and after the sub-step), not on what the solve left of the springs around
+        them, so solver error never lets go: a squeeze's fingertips (coming together) and one
+        fingertip dragging a free sheet keep their grip. Held rigidly, two fingertips moving
+        apart or one dragging a sheet pinned elsewhere stretched it by up to 19 times its
+        length (`bench/random_scenes.py`)."""
         gripped = np.flatnonzero(self._grip_probe >= 0)
         if gripped.size == 0:
             return
