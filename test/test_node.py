@@ -76,6 +76,10 @@ def press_for(client, seconds: float, position=PRESS, rate: float = 30.0, **kwar
     client.spin_for(seconds, publish)
 
 
+def _seconds(stamp) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
 def diagnostics(client) -> dict:
     latest = client.latest('/diagnostics')
     assert latest is not None, 'no diagnostics received'
@@ -192,19 +196,24 @@ def test_markers_are_valid_for_rviz(sim):
 @pytest.mark.slow
 def test_a_probe_moves_the_points_under_it_and_letting_go_stops_it(sim):
     reset(sim)
-    flat = cloud_positions(fresh_cloud(sim))[:VERTICES]
+    before = fresh_cloud(sim)
+    flat = cloud_positions(before)[:VERTICES]
     under = np.hypot(flat[:, 0] - PRESS[0], flat[:, 1] - PRESS[1]) < 0.015
     away = np.hypot(flat[:, 0], flat[:, 1]) > 0.08
     assert under.sum() >= 1 and away.sum() > 100
     # the node steps in real time beside the test: on a loaded machine its cloud can trail
-    # the poses, so the press goes on (up to 6 s) until the cloud shows the sheet lifted
+    # the poses, so the press goes on (up to 11 s) until the cloud shows the sheet lifted
+    # and settled, a simulated second after the press began (the sheet the cap lifts at
+    # once is flung: 41 mm far out 0.07 s in; 48 mm seen once in a run beside other work)
     press_for(sim, 1.0)
-    deadline = time.monotonic() + 5.0
+    deadline = time.monotonic() + 10.0
     while True:
         press_for(sim, 0.5)
-        pressed = cloud_positions(fresh_cloud(sim))[:VERTICES]
+        cloud = fresh_cloud(sim)
+        pressed = cloud_positions(cloud)[:VERTICES]
         lift = pressed[under, 2].max()
-        if lift > 0.01 or time.monotonic() > deadline:
+        settled = _seconds(cloud.header.stamp) - _seconds(before.header.stamp) > 1.5
+        if (lift > 0.01 and settled) or time.monotonic() > deadline:
             break
     assert lift > 0.01, f'the probe lifted the sheet above it only by {lift:.4f} m ' \
         f'(diagnostics: {diagnostics(sim)})'

@@ -218,6 +218,31 @@ def test_a_sheet_springing_back_after_a_fast_poke_is_not_dragged_round_the_probe
     assert simulator.max_probe_penetration() < 1e-3
 
 
+@pytest.mark.parametrize('radius', [0.005, 0.003])
+def test_a_probe_smaller_than_the_cells_pushes_the_sheet_instead_of_passing_through(radius):
+    """`poke` at 33² (cells 6.6 x 9.3 mm) with a probe of 5 or 3 mm radius: it fits between
+    a triangle's corners, so no vertex need touch it, and it went through the sheet in
+    every one of the 61 frames of its push and sweep. The triangles are kept out of it
+    (kernels.project_probes_on_triangles): the sheet stays in front of it."""
+    mapping = with_overrides(builtin_mapping('poke'), grid=33)
+    mapping['probes'][0]['radius'] = radius
+    poke = scenario_from_mapping(mapping)
+    pushing_from, sweep_to = poke.probes[0].keyframes[1][0], poke.probes[0].keyframes[2][0]
+    simulator = build_simulator(poke)
+    through = strain = 0.0
+    for frame in range(poke.frame_count):
+        time = (frame + 1) * poke.config.solver.dt
+        simulator.set_probes(*poke.probe_inputs(time))
+        simulator.step_frame()
+        strain = max(strain, simulator.max_strain())
+        if pushing_from <= time <= sweep_to:
+            centre, positions = simulator.probes.end[0], simulator.sheet.positions
+            near = np.hypot(positions[:, 0] - centre[0], positions[:, 2] - centre[2]) < 0.012
+            through += positions[near, 1].min() > centre[1]  # no paper ahead of it
+    assert through == 0, f'the probe was through the sheet in {through} frames'
+    assert strain < 0.05, strain
+
+
 def _slide_sheet_with_fingertip(probe_friction: float) -> np.ndarray:
     """A 1.5 cm fingertip comes down on the middle of a sheet on a table, presses 3 mm
     into it, slides 45 mm along x in 1 s and stays pressed; the vertices' x travel [m]."""

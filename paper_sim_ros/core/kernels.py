@@ -453,6 +453,120 @@ def project_probes(positions, start_positions, inverse_mass, probe_start, probe_
     return moved
 
 
+@njit(cache=True, inline='always')
+def _closest_on_triangle(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
+    """Barycentric weights (wa, wb, wc) of the point of triangle abc nearest p (Ericson,
+    Real-Time Collision Detection, 5.1.5)."""
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        t = d1 / (d1 - d3)
+        return 1.0 - t, t, 0.0
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        return 1.0 - t, 0.0, t
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - t, t
+    total = va + vb + vc
+    if total <= 0.0:  # degenerate (collapsed) triangle: its first corner
+        return 1.0, 0.0, 0.0
+    v = vb / total
+    w = vc / total
+    return 1.0 - v - w, v, w
+
+
+@njit(cache=True)
+def project_probes_on_triangles(positions, inverse_mass, triangles, probe_start, probe_end,
+                                probe_radius, small, pad_height, touched):
+    """Push the triangles out of every ``small`` probe (one that fits between a triangle's
+    corners, so that no vertex need touch it), swept from its start to its end centre in
+    moves of at most a quarter radius: where a triangle's point nearest the centre is
+    inside, its corners move along the way out by the depth, shared by their barycentric
+    weights and inverse masses (a point-triangle constraint, as position-based dynamics
+    does). Where the way out leaves below ``pad_height`` (the table) the probe is
+    flattened, and the triangle is pinched there, not pushed. Marks the moved corners in
+    ``touched``; returns how many triangles it pushed."""
+    moved = 0
+    centre = np.empty(3)
+    for p in range(probe_radius.shape[0]):
+        if not small[p]:
+            continue
+        radius = probe_radius[p]
+        travel = 0.0
+        for k in range(3):
+            travel += (probe_end[p, k] - probe_start[p, k]) ** 2
+        moves = max(1, int(np.ceil(np.sqrt(travel) / (0.25 * radius))))
+        for m in range(1, moves + 1):
+            fraction = m / moves
+            for k in range(3):
+                centre[k] = (1.0 - fraction) * probe_start[p, k] + fraction * probe_end[p, k]
+            for t in range(triangles.shape[0]):
+                a = triangles[t, 0]
+                b = triangles[t, 1]
+                c = triangles[t, 2]
+                # cheap rejection: the sphere misses the triangle's bounding sphere
+                gx = (positions[a, 0] + positions[b, 0] + positions[c, 0]) / 3.0
+                gy = (positions[a, 1] + positions[b, 1] + positions[c, 1]) / 3.0
+                gz = (positions[a, 2] + positions[b, 2] + positions[c, 2]) / 3.0
+                bound = 0.0
+                for corner in (a, b, c):
+                    bound = max(bound, (positions[corner, 0] - gx) ** 2
+                                + (positions[corner, 1] - gy) ** 2
+                                + (positions[corner, 2] - gz) ** 2)
+                gap = np.sqrt((centre[0] - gx) ** 2 + (centre[1] - gy) ** 2
+                              + (centre[2] - gz) ** 2)
+                if gap >= np.sqrt(bound) + radius:
+                    continue
+                wa, wb, wc = _closest_on_triangle(
+                    centre[0], centre[1], centre[2],
+                    positions[a, 0], positions[a, 1], positions[a, 2],
+                    positions[b, 0], positions[b, 1], positions[b, 2],
+                    positions[c, 0], positions[c, 1], positions[c, 2])
+                nx = wa * positions[a, 0] + wb * positions[b, 0] + wc * positions[c, 0]
+                ny = wa * positions[a, 1] + wb * positions[b, 1] + wc * positions[c, 1]
+                nz = wa * positions[a, 2] + wb * positions[b, 2] + wc * positions[c, 2]
+                nx -= centre[0]
+                ny -= centre[1]
+                nz -= centre[2]
+                distance = np.sqrt(nx * nx + ny * ny + nz * nz)
+                if distance >= radius or distance < EPSILON_LENGTH \
+                        or centre[2] + radius * nz / distance < pad_height:
+                    continue  # clear of it, or under its flattened pad (pinched there)
+                weight = (wa * wa * inverse_mass[a] + wb * wb * inverse_mass[b]
+                          + wc * wc * inverse_mass[c])
+                if weight <= 0.0:
+                    continue
+                scale = (radius - distance) / (distance * weight)
+                for corner, share in ((a, wa), (b, wb), (c, wc)):
+                    step = scale * share * inverse_mass[corner]
+                    if step != 0.0:
+                        positions[corner, 0] += step * nx
+                        positions[corner, 1] += step * ny
+                        positions[corner, 2] += step * nz
+                        touched[corner] = True
+                moved += 1
+    return moved
+
+
 @njit(cache=True)
 def grip_pinched(positions, inverse_mass, probe_center, probe_radius, pressing, ground_height,
                  grip_probe, grip_offset):

@@ -63,6 +63,10 @@ RESTORE_FLOOR = 1e-12
 """Kinetic energy [J] below which there is no motion to scale (a sheet at rest)."""
 FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
+SMALL_PROBE_EDGES = 0.6
+"""A probe whose radius is below this many of the mesh's longest edges can pass between a
+triangle's corners (a right triangle's circumradius is half its longest edge): the
+triangles, not only the vertices, are kept out of it (kernels.project_probes_on_triangles)."""
 GRIP_ROW, CONTACT_ROW = 0, 1
 """Kinds of the solves' constraint rows (Simulator._set_contact_rows)."""
 GRIP_ROWS_MOST = 192
@@ -211,6 +215,11 @@ class Simulator:
         constraint sweep order, the long-range attachments and the global step's factor."""
         sheet = self.sheet
         self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
+        hinge = sheet.spring_kind == HINGE
+        self._longest_edge = float(sheet.spring_rest_length[hinge].max()) if np.any(hinge) \
+            else 0.0
+        """The longest triangle edge at rest [m]: how small a probe may pass between
+        vertices (SMALL_PROBE_EDGES)."""
         # a fold changes a few terms of each system, known without assembling them (not
         # when vertices were added, or the systems' settings changed)
         known_change = sheet.vertex_count == self._grip_probe.shape[0] \
@@ -1027,12 +1036,19 @@ class Simulator:
         # the probes first, the table last: the table is rigid, and a probe pressed into
         # it is flattened there like a fingertip, pinching the sheet on the table
         if self.probes.count:
+            touched = touched if touched is not None else np.zeros(positions.shape[0],
+                                                                   dtype=bool)
+            pad_height = contact.ground_height if contact.ground_enabled else -np.inf
             moved += kernels.project_probes(
                 positions, start_positions, self._inverse_mass, probe_from, probe_to,
                 self.probes.radius, self.probes.active,
-                contact.probe_friction if with_friction else 0.0, True,
-                contact.ground_height if contact.ground_enabled else -np.inf,
-                touched if touched is not None else np.zeros(positions.shape[0], dtype=bool))
+                contact.probe_friction if with_friction else 0.0, True, pad_height, touched)
+            small = self.probes.active \
+                & (self.probes.radius < SMALL_PROBE_EDGES * self._longest_edge)
+            if np.any(small):
+                moved += kernels.project_probes_on_triangles(
+                    positions, self._inverse_mass, self.sheet.triangles, probe_from, probe_to,
+                    self.probes.radius, small, pad_height, touched)
         if contact.ground_enabled:
             moved += kernels.project_ground(positions, start_positions, self._inverse_mass,
                                             contact.ground_height, contact.ground_friction,
