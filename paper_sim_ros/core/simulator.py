@@ -593,9 +593,10 @@ class Simulator:
         if self._constraint_springs.size:
             carried = self._grip_probe >= 0
             travel = np.linalg.norm(probe_to - probe_from, axis=1)
-            if np.any(self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)):
-                carried |= touched & ~self._chasing_fast_probes(positions, start_positions,
-                                                                probe_from, probe_to)
+            fast = self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)
+            if np.any(fast):
+                carried |= touched & ~self._chasing_fast_probes(
+                    fast, positions, start_positions, probe_from, probe_to)
             inverse_mass = np.where(carried, 0.0, self._inverse_mass)
             # a sheet pushed together on the table can only buckle up; one lying there
             # crumpled is not being pushed (lifting it would keep it moving for ever)
@@ -612,20 +613,18 @@ class Simulator:
             self._keep_angular_momentum(momentum * (1.0 - h * self.config.solver.air_damping),
                                         h, spin_kept == SPIN_VERTICAL)
 
-    def _chasing_fast_probes(self, positions, start_positions, probe_from, probe_to
+    def _chasing_fast_probes(self, fast, positions, start_positions, probe_from, probe_to
                              ) -> np.ndarray:
-        """(V,) bool: the vertices behind a probe that moved more than FAST_PROBE_TRAVEL
-        radii in the sub-step (on the far side of the plane through its centre across its
-        motion) both where it and they started and where they ended. Such a probe moves away
-        from them: if they touch it, the sheet is not pushed but chases it (springing back
-        after a poke, faster than the probe withdraws). Carried along, the vertices it
-        touched were held apart round the probe's back, a spring between them at 14-16 % in
-        every other frame. Vertices that started ahead and ended behind were pushed through,
-        and are carried."""
+        """(V,) bool: the vertices behind one of the ``fast`` probes (those that moved more
+        than FAST_PROBE_TRAVEL radii in the sub-step; on the far side of the plane through
+        its centre across its motion) both where it and they started and where they ended.
+        Such a probe moves away from them: if they touch it, the sheet is not pushed but
+        chases it (springing back after a poke, faster than the probe withdraws). Carried
+        along, the vertices it touched were held apart round the probe's back, a spring
+        between them at 14-16 % in every other frame. Vertices that started ahead and ended
+        behind were pushed through, and are carried."""
         chasing = np.zeros(positions.shape[0], dtype=bool)
         motion = probe_to - probe_from
-        fast = self.probes.active \
-            & (np.linalg.norm(motion, axis=1) > FAST_PROBE_TRAVEL * self.probes.radius)
         for probe in np.flatnonzero(fast):
             chasing |= ((start_positions - probe_from[probe]) @ motion[probe] < 0.0) \
                 & ((positions - probe_to[probe]) @ motion[probe] < 0.0)
