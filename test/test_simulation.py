@@ -218,6 +218,32 @@ def test_a_sheet_springing_back_after_a_fast_poke_is_not_dragged_round_the_probe
     assert simulator.max_probe_penetration() < 1e-3
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize('seed', range(10))
+def test_letting_go_of_a_squeeze_tears_the_sheet_no_further_than_the_squeeze(seed):
+    """`squeeze` at 33²: as the fingertips rise off the table they let go, and the paper
+    they pushed together springs out under them. The solve holds nothing for a rising
+    probe, and it carried that paper 12-16 mm into a fingertip in one sub-step, to near its
+    centre; pushed out from there after the solve, neighbours went out on opposite sides,
+    and at 6 of these 10 seeds the largest strain after lift-off was 1.24-1.76 times the
+    squeeze's own (up to 206 %). A vertex carried deeper than half the radius now gets a
+    row on the side it came from: 0.50-1.05 times. (The squeeze itself strains the sheet
+    far beyond the band, 81-199 % here: issue 13, docs/contact.md.)"""
+    squeeze = load_scenario('squeeze', grid=33, seed=seed)  # damage on
+    simulator = build_simulator(squeeze)
+    dt = squeeze.config.solver.dt
+    squeezing = letting_go = 0.0
+    for frame in range(squeeze.frame_count):
+        time = (frame + 1) * dt
+        simulator.set_probes(*squeeze.probe_inputs(time))
+        simulator.step_frame()
+        if time < 2.5:  # the fingertips rise from 2.5 s
+            squeezing = max(squeezing, simulator.max_strain())
+        else:
+            letting_go = max(letting_go, simulator.max_strain())
+    assert letting_go < 1.1 * squeezing, (squeezing, letting_go)
+
+
 @pytest.mark.parametrize('radius', [0.005, 0.003])
 def test_a_probe_smaller_than_the_cells_pushes_the_sheet_instead_of_passing_through(radius):
     """`poke` at 33² (cells 6.6 x 9.3 mm) with a probe of 5 or 3 mm radius: it fits between
