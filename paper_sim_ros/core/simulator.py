@@ -905,9 +905,9 @@ class Simulator:
             return False
         vertex, direction, value = self._rows
         contact = self.config.contact
-        deep = self._deep_in_rising_probes(positions)
-        deep[vertex] = False
-        if not np.any(deep) and kernels.contact_rows_hold(
+        deep_in = self._deep_in_rising_probes(positions)
+        deep_in[vertex] = -1
+        if not np.any(deep_in >= 0) and kernels.contact_rows_hold(
                 positions, self._probe_to, self.probes.radius, self._free_probes,
                 contact.ground_height, contact.ground_enabled, CONTACT_TOLERANCE,
                 self.sheet.pinned, vertex, self._row_kind == CONTACT_ROW, multipliers):
@@ -915,11 +915,11 @@ class Simulator:
         keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
         inside = self._inside_probes(positions)
         inside[vertex] = False
-        deep &= ~inside
-        normal, surface = self._contact_planes(positions, np.flatnonzero(inside),
-                                               self._probe_to)
-        deep_normal, deep_surface = self._rising_contact_planes(positions, deep)
-        added = np.concatenate([np.flatnonzero(inside), np.flatnonzero(deep)])
+        deep_in[inside] = -1
+        near, deep = np.flatnonzero(inside), np.flatnonzero(deep_in >= 0)
+        normal, surface = self._contact_planes(positions, near, self._probe_to)
+        deep_normal, deep_surface = self._rising_contact_planes(deep, deep_in[deep])
+        added = np.concatenate([near, deep])
         normal = np.concatenate([normal, deep_normal])
         surface = np.concatenate([surface, deep_surface])
         self._rows = (np.concatenate([vertex[keep], added]),
@@ -985,33 +985,28 @@ class Simulator:
         return inside
 
     def _deep_in_rising_probes(self, positions) -> np.ndarray:
-        """(V,) bool: the free vertices deeper than DEEP_IN_RISING_PROBE of its radius inside
-        a rising probe. At a squeeze's lift-off the released paper springs out under the
-        rising fingertips: a solve that does not see them carried it 12-16 mm into one in
-        a sub-step, to within a few millimetres of its centre, and pushed out from there
-        after the solve it was torn across the fingertip (65², seed 0: 343 %)."""
-        deep = np.zeros(positions.shape[0], dtype=bool)
+        """(V,) int: for each free vertex deeper than DEEP_IN_RISING_PROBE of its radius
+        inside a rising probe, the rising probe it is deepest in; -1 elsewhere. At a
+        squeeze's lift-off the released paper springs out under the rising fingertips: a
+        solve that does not see them carried it 12-16 mm into one in a sub-step, to within
+        a few millimetres of its centre, and pushed out from there after the solve it was
+        torn across the fingertip (65², seed 0: 343 %)."""
+        deep_in = np.full(positions.shape[0], -1)
         rising = np.flatnonzero(self._rising_probes)
         if rising.size:
             distance = np.linalg.norm(positions[:, None, :] - self._probe_to[None, rising],
                                       axis=2)
-            deep = np.any(distance < (1.0 - DEEP_IN_RISING_PROBE)
-                          * self.probes.radius[None, rising], axis=1)
+            radius = self.probes.radius[None, rising]
+            deep = np.any(distance < (1.0 - DEEP_IN_RISING_PROBE) * radius, axis=1)
             deep[self.sheet.pinned | (self._grip_probe >= 0)] = False
-        return deep
+            deep_in[deep] = rising[np.argmin(distance[deep] - radius, axis=1)]
+        return deep_in
 
-    def _rising_contact_planes(self, positions, deep):
-        """Where the ``deep`` vertices touch the rising probe they are deepest in: its
-        surface on the side they came from (their start positions relative to its start
-        centre), moved with it, and the unit normals out of it there. From where they are,
-        near its centre, the way out is no way back."""
-        vertices = np.flatnonzero(deep)
-        rising = np.flatnonzero(self._rising_probes)
-        if vertices.size == 0:
-            return np.zeros((0, 3)), np.zeros((0, 3))
-        gap = np.linalg.norm(positions[vertices, None, :] - self._probe_to[None, rising], axis=2) \
-            - self.probes.radius[None, rising]
-        probe = rising[np.argmin(gap, axis=1)]
+    def _rising_contact_planes(self, vertices, probe):
+        """Where ``vertices`` deep in the rising probes ``probe`` touch them: each probe's
+        surface on the side its vertex came from (its start position relative to the
+        probe's start centre), moved with it, and the unit normals out of it there. From
+        where they are, near its centre, the way out is no way back."""
         normal = self._start_positions[vertices] - self._probe_from[probe]
         normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
         return normal, self._probe_to[probe] + self.probes.radius[probe, None] * normal
