@@ -10,9 +10,11 @@ simulation slips (its clock origin moves forward, the real-time factor drops bel
 of taking bigger steps. With ``publish_clock`` the simulation is the clock instead: it steps
 as fast as it can, up to ``max_real_time_factor``, never slips, and publishes its time on
 /clock after every frame for nodes run with ``use_sim_time``. Outputs are scheduled in
-simulated time at their own rates, and at
-most one of each is published per tick: when frames are stepped faster than outputs can
-follow, publications are dropped, never physics frames. Both are counted in ``/diagnostics``.
+simulated time at their own rates. The point
+cloud and the markers are published at most once per tick: when frames are stepped faster
+than they can follow, publications are dropped, never physics frames. Both are counted in
+``/diagnostics``. A virtual camera renders the frame its slot falls on, also in a tick of
+several frames, so that its images keep to the grid t = k / rate of simulated time.
 
 Stamps. Every header carries ``frame_id`` and the time of the state it shows: the clock time
 at which the simulation started (or was reset) plus the simulated time.
@@ -507,6 +509,9 @@ class PaperSimNode(Node):
             strain = simulator.max_strain()
             stats.max_strain = max(stats.max_strain, strain)
             stats.recent_strains.append(strain)
+            # a camera renders the frame its slot falls on, also inside a tick of several
+            # frames: its images keep to the grid t = k / rate of simulated time
+            self._publish_cameras()
             if self._recorder is not None and frame < due - 1:
                 self._recorder.log_inputs(self._recording_time(), simulator)
         if self._clock_pub is not None:
@@ -536,21 +541,15 @@ class PaperSimNode(Node):
         sim_time = simulator.time
         want_points = self._points_schedule.take(sim_time, settings.publish_rate)
         want_markers = self._markers_schedule.take(sim_time, settings.markers_rate)
-        due_cameras = [index for index, (camera, schedule)
-                       in enumerate(zip(settings.cameras, self._camera_schedules))
-                       if schedule.take(sim_time, camera.rate)]
         recorder = self._recorder
-        if not (want_points or want_markers or due_cameras):
+        if not (want_points or want_markers):
             if recorder is not None:
                 recorder.log_inputs(self._recording_time(), simulator)
             return
         started = time.perf_counter()
-        sheet = simulator.sheet
-        if not (np.isfinite(sheet.positions).all()):
-            self._stats.nonfinite_skipped += 1
-            self.get_logger().error('non-finite sheet state: frame not published',
-                                    throttle_duration_sec=WARN_EVERY)
+        if not self._sheet_is_finite():
             return
+        sheet = simulator.sheet
         header = Header(frame_id=settings.frame_id, stamp=self._stamp())
         normals = vertex_normals(sheet.positions, sheet.triangles)
         labels = simulator.damage_labels()
@@ -558,10 +557,8 @@ class PaperSimNode(Node):
         if want_points:
             self._send(self._points_pub, create_cloud(header, self._cloud_points(
                 sheet, normals, labels)), header.stamp)
-        if want_markers or due_cameras or recorder is not None:
+        if want_markers or recorder is not None:
             colors = self._appearance.vertex_colors(sheet)
-        for index in due_cameras:
-            self._publish_camera(index, header, colors)
         if want_markers:
             centers, radii, active = (simulator.probes.end, simulator.probes.radius,
                                       simulator.probes.active)
@@ -581,6 +578,32 @@ class PaperSimNode(Node):
                                         'real_time_factor': stats.last_real_time_factor})
         self._stats.window_publish_seconds += time.perf_counter() - started
         self._stats.window_publishes += 1
+
+    def _sheet_is_finite(self) -> bool:
+        """False, counted and logged, if the sheet holds a NaN or infinity: never published."""
+        if np.isfinite(self.simulator.sheet.positions).all():
+            return True
+        self._stats.nonfinite_skipped += 1
+        self.get_logger().error('non-finite sheet state: frame not published',
+                                throttle_duration_sec=WARN_EVERY)
+        return False
+
+    def _publish_cameras(self) -> None:
+        """The virtual cameras whose slot has come at this frame."""
+        sim_time = self.simulator.time
+        due_cameras = [index for index, (camera, schedule)
+                       in enumerate(zip(self._settings.cameras, self._camera_schedules))
+                       if schedule.take(sim_time, camera.rate)]
+        if not due_cameras:
+            return
+        started = time.perf_counter()
+        if not self._sheet_is_finite():
+            return
+        header = Header(frame_id=self._settings.frame_id, stamp=self._stamp())
+        colors = self._appearance.vertex_colors(self.simulator.sheet)
+        for index in due_cameras:
+            self._publish_camera(index, header, colors)
+        self._stats.window_publish_seconds += time.perf_counter() - started
 
     def _publish_camera(self, index: int, header: Header, colors: np.ndarray) -> None:
         """What the ``index``-th virtual camera sees, its four messages under one header in
@@ -627,6 +650,8 @@ class PaperSimNode(Node):
             probe.track.forget_placement()
         self._points_schedule = Schedule(dropped=self._points_schedule.dropped)
         self._markers_schedule = Schedule(dropped=self._markers_schedule.dropped)
+        self._camera_schedules = [Schedule(dropped=schedule.dropped)
+                                  for schedule in self._camera_schedules]
         self._delete_all_pending = True
         self._crumple_calls = 0
         self._stats.resets += 1

@@ -8,7 +8,9 @@ import math
 
 import numpy as np
 import pytest
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_srvs.srv import Trigger
 
 from paper_sim_ros.core.camera import HIT_PAPER
 from paper_sim_ros.msg_adapters.camera import PIXEL_DTYPE
@@ -80,6 +82,47 @@ def test_every_frame_has_its_four_messages_under_one_header_at_the_rate(camera_n
     assert np.min(gaps) == pytest.approx(1.0 / RATE, abs=1e-3)
 
 
+@pytest.mark.slow
+def test_a_tick_of_several_frames_keeps_the_camera_on_its_slot_grid(tmp_path):
+    """/clock advances seven frames at a time (a node behind its clock catches up so): the
+    camera renders the frames its 10 Hz slots fall on, not the tick's last frame."""
+    domain = new_domain_id()
+    process = start_node(tmp_path, {
+        'sheet.nx': 9, 'sheet.ny': 9, 'publish_rate': 0.0, 'markers_rate': 0.0,
+        'use_sim_time': True, 'max_catchup_frames': 8, 'physics_rate': 60.0,
+        'cameras': ['top'], 'top.rate': RATE, 'top.width': 32, 'top.height': 24},
+        domain_id=domain)
+    client = RosClient(domain)
+    start, frame, stride, ticks = 100.0, 1.0 / 60.0, 7, 13
+    try:
+        client.subscribe(CameraInfo, TOPICS['info'][0])
+        clock = client.node.create_publisher(Clock, '/clock', 10)
+
+        def publish_clock(seconds: float) -> None:
+            message = Clock()
+            message.clock.sec = int(seconds)
+            message.clock.nanosec = int(round((seconds - int(seconds)) * 1e9))
+            clock.publish(message)
+            client.spin_for(0.15)
+        client.spin_until(lambda: client.node.count_subscribers('/clock') >= 1
+                          and client.node.count_publishers(TOPICS['info'][0]) >= 1, 60,
+                          'the node to subscribe to /clock and publish camera info', process)
+        for _ in range(3):  # the first tick on /clock sets the simulation's clock origin
+            publish_clock(start)
+        for tick in range(1, ticks + 1):
+            publish_clock(start + tick * stride * frame)
+        client.spin_until(lambda: len(client.messages(TOPICS['info'][0])) >= 16, 30,
+                          f'the camera frames of {ticks * stride} simulated frames: got '
+                          f'{stamps_of(client.messages(TOPICS["info"][0]))}', process)
+    finally:
+        client.close()
+        stop_cleanly(process)
+    # the first physics frame, then every slot k / rate up to the last frame stepped
+    simulated = np.array(stamps_of(client.messages(TOPICS['info'][0]))) - start
+    expected = np.concatenate([[frame], np.arange(1, 16) / RATE])
+    np.testing.assert_allclose(simulated, expected, atol=1e-6)
+
+
 def test_images_and_info_describe_the_camera_above_the_sheet(camera_node):
     depth = camera_node.latest(TOPICS['depth'][0])
     color = camera_node.latest(TOPICS['color'][0])
@@ -127,6 +170,23 @@ def test_organised_cloud_shows_the_sheet_with_its_material_coordinates(camera_no
     np.testing.assert_allclose(points['u'][paper], points['x'][paper], atol=2e-3)
     np.testing.assert_allclose(points['v'][paper], -points['y'][paper], atol=2e-3)
     np.testing.assert_allclose(points['z'][paper], HEIGHT_ABOVE, atol=2e-3)
+
+
+def test_cameras_go_on_at_their_rate_after_a_reset(camera_node):
+    """A reset restarts simulated time at zero: the cameras start their slot grid again
+    rather than wait for the time they had reached. Runs last on the shared node."""
+    info = TOPICS['info'][0]
+    camera_node.spin_until(lambda: len(camera_node.messages(info)) >= 20, 30,
+                           'two seconds of camera frames')
+    before = len(camera_node.messages(info))
+    response = camera_node.call(Trigger, 'paper/reset', Trigger.Request())
+    assert response.success
+    camera_node.spin_until(lambda: len(camera_node.messages(info)) >= before + 10, 30,
+                           'ten camera frames after the reset')
+    # the stamps go on across the reset (clock time of the reset plus simulated time), with
+    # no gap of the two seconds simulated before it
+    gaps = np.diff(stamps_of(camera_node.messages(info)[before - 5:]))
+    assert gaps.max() < 1.0, gaps
 
 
 @pytest.mark.parametrize('name, value, reason', [
