@@ -449,6 +449,27 @@ def test_damage_works_with_the_papers_solver():
     assert simulator.breaks >= 30
 
 
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_sheet_switched_to_the_constrained_solver_breaks_only_where_probes_push(seed):
+    """Crumpled under the paper's force solver, then run on by the constrained one without a
+    probe: Eq. 7 reads what that solver says compression is (what probes impose), not the
+    lengths of a crumpled sheet held in its strain band. No new break, the mesh valid."""
+    config = SimulationConfig(sheet=SheetConfig(nx=25, ny=19, width=0.17, height=0.13),
+                              solver=SolverConfig(method='paper'), seed=seed,
+                              contact=ContactConfig(ground_enabled=True))
+    simulator = Simulator(config)
+    simulator.crumple(60, seed=seed)
+    for _ in range(10):
+        simulator.step_frame()
+    breaks = simulator.breaks
+    constrained = SolverConfig(method='constrained', dt=1.0 / 30.0)
+    simulator.reconfigure(replace(config, solver=constrained))
+    for _ in range(30):
+        simulator.step_frame()
+    assert simulator.breaks == breaks, (breaks, simulator.breaks)
+    assert mesh_problems(simulator.sheet) == [] and not simulator.nan_seen
+
+
 def test_damage_config_refuses_bad_values_with_reasons():
     for field, value in (('fragility', 0.0), ('fragility', float('nan')),
                          ('area_conservation', -0.1), ('fold_threshold', 1.0),

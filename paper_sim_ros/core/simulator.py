@@ -178,7 +178,15 @@ class Simulator:
         effect at the next frame (what the solver derives from them is rebuilt); sheet
         and damage settings apply from the next reset."""
         solver_changed = config.solver != self.config.solver
+        method_changed = config.solver.method != self.config.solver.method
         self.config = config
+        if method_changed:
+            # what Eq. 7 reads as compression belongs to the solver: a held sheet's lengths
+            # are the strain band's, its compression the probes' (a sheet crumpled by the
+            # force solver, read by its lengths under the constrained one, broke 800
+            # springs a frame for as long as it ran)
+            self.damage.held_inextensible = config.solver.method == 'constrained'
+            self.damage.probe_compression.clear()
         if solver_changed:
             self.topology_changed()
 
