@@ -405,6 +405,8 @@ class PaperSimNode(Node):
         try:
             self._tick()
         except Exception as error:  # noqa: BLE001 - a failing frame must not end the node
+            if not self.context.ok():
+                return  # Ctrl-C or SIGTERM shut the context down mid-tick: nothing failed
             self._stats.tick_errors += 1
             self.get_logger().error(f'simulation tick failed: {error!r}',
                                     throttle_duration_sec=WARN_EVERY)
