@@ -85,11 +85,13 @@ def test_every_frame_has_its_four_messages_under_one_header_at_the_rate(camera_n
 @pytest.mark.slow
 def test_a_tick_of_several_frames_keeps_the_camera_on_its_slot_grid(tmp_path):
     """/clock advances seven frames at a time (a node behind its clock catches up so): the
-    camera renders the frames its 10 Hz slots fall on, not the tick's last frame."""
+    camera renders the frames its 10 Hz slots fall on, not the tick's last frame. (Ticks
+    may merge on a busy machine; with no cap on catching up none slips, and the slots are
+    the same however the frames are shared out.)"""
     domain = new_domain_id()
     process = start_node(tmp_path, {
         'sheet.nx': 9, 'sheet.ny': 9, 'publish_rate': 0.0, 'markers_rate': 0.0,
-        'use_sim_time': True, 'max_catchup_frames': 8, 'physics_rate': 60.0,
+        'use_sim_time': True, 'max_catchup_frames': 1000, 'physics_rate': 60.0,
         'cameras': ['top'], 'top.rate': RATE, 'top.width': 32, 'top.height': 24},
         domain_id=domain)
     client = RosClient(domain)
