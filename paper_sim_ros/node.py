@@ -37,6 +37,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy, DurabilityPolicy
+from builtin_interfaces.msg import Time as TimeMessage
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMessage
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -513,12 +514,12 @@ class PaperSimNode(Node):
             stats.recent_strains.append(strain)
             # a camera renders the frame its slot falls on, also inside a tick of several
             # frames: its images keep to the grid t = k / rate of simulated time
-            self._publish_cameras()
+            colors = self._publish_cameras()
             if self._recorder is not None and frame < due - 1:
                 self._recorder.log_inputs(self._recording_time(), simulator)
         if self._clock_pub is not None:
             self._clock_pub.publish(ClockMessage(clock=self._stamp()))
-        self._publish()
+        self._publish(colors)
 
     def _set_probes(self, centers: np.ndarray, radii: np.ndarray, active: np.ndarray) -> None:
         try:
@@ -537,7 +538,9 @@ class PaperSimNode(Node):
                     clock_type=self.get_clock().clock_type).to_msg()
 
     # ------------------------------------------------------------------------ publishing
-    def _publish(self) -> None:
+    def _publish(self, colors: np.ndarray | None) -> None:
+        """The point cloud, the markers and the recording when due; ``colors``: the sheet's
+        vertex colours if a camera already computed them this frame."""
         settings = self._settings
         simulator = self.simulator
         sim_time = simulator.time
@@ -555,11 +558,10 @@ class PaperSimNode(Node):
         header = Header(frame_id=settings.frame_id, stamp=self._stamp())
         normals = vertex_normals(sheet.positions, sheet.triangles)
         labels = simulator.damage_labels()
-        colors = None
         if want_points:
             self._send(self._points_pub, create_cloud(header, self._cloud_points(
                 sheet, normals, labels)), header.stamp)
-        if want_markers or recorder is not None:
+        if colors is None and (want_markers or recorder is not None):
             colors = self._appearance.vertex_colors(sheet)
         if want_markers:
             centers, radii, active = (simulator.probes.end, simulator.probes.radius,
@@ -590,24 +592,26 @@ class PaperSimNode(Node):
                                 throttle_duration_sec=WARN_EVERY)
         return False
 
-    def _publish_cameras(self) -> None:
-        """The virtual cameras whose slot has come at this frame."""
+    def _publish_cameras(self) -> np.ndarray | None:
+        """The virtual cameras whose slot has come at this frame; the vertex colours they
+        were rendered with, if any (the frame's other outputs use them too)."""
         sim_time = self.simulator.time
         due_cameras = [index for index, (camera, schedule)
                        in enumerate(zip(self._settings.cameras, self._camera_schedules))
                        if schedule.take(sim_time, camera.rate)]
         if not due_cameras:
-            return
+            return None
         started = time.perf_counter()
         if not self._sheet_is_finite():
-            return
-        header = Header(frame_id=self._settings.frame_id, stamp=self._stamp())
+            return None
+        stamp = self._stamp()
         colors = self._appearance.vertex_colors(self.simulator.sheet)
         for index in due_cameras:
-            self._publish_camera(index, header, colors)
+            self._publish_camera(index, stamp, colors)
         self._stats.window_publish_seconds += time.perf_counter() - started
+        return colors
 
-    def _publish_camera(self, index: int, header: Header, colors: np.ndarray) -> None:
+    def _publish_camera(self, index: int, stamp: TimeMessage, colors: np.ndarray) -> None:
         """What the ``index``-th virtual camera sees, its four messages under one header in
         its optical frame."""
         settings = self._settings
@@ -616,7 +620,7 @@ class PaperSimNode(Node):
         rng = np.random.default_rng([settings.noise_seed, self.simulator.frame, 1, index])
         frame = with_depth_noise(render_simulator(config, self.simulator, colors),
                                  camera.depth_noise_stddev, rng)
-        header = Header(frame_id=config.optical_frame, stamp=header.stamp)
+        header = Header(frame_id=config.optical_frame, stamp=stamp)
         if self._bag is not None and config.name not in self._cameras_on_tf_static:
             self._bag.write_camera_transform(settings.frame_id, config,
                                              Time.from_msg(header.stamp).nanoseconds)
