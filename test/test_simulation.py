@@ -735,7 +735,8 @@ def test_a_factor_updated_in_place_solves_its_system_or_declines():
 def test_constrained_solve_equals_a_factor_with_the_vertices_held():
     """ConstrainedSolve (core/projective.py): rows holding some vertices where they are
     and others on a plane through them give, on the pins-only factor, what a factor with
-    those vertices held gives (to round-off), and the plane rows are met exactly."""
+    those vertices held gives (to round-off), and the plane rows are met exactly; under
+    other rows on the same right-hand side, without a solve."""
     from paper_sim_ros.core.projective import ConstrainedSolve, GlobalStep
     sheet, pinned, entries = pinned_springs_system()
     vertex_count = sheet.vertex_count
@@ -762,6 +763,12 @@ def test_constrained_solve_equals_a_factor_with_the_vertices_held():
     solve.solve(rhs, positions, touched, normal, value)
     np.testing.assert_allclose(np.einsum('va,va->v', normal, positions[touched]), value,
                                atol=1e-12)
+    # rows settled again on the same right-hand side reuse the last x₀ = A⁻¹ b (a right-hand
+    # side of NaN would show a solve), and give what the held factor gives
+    positions = targets.copy()
+    solve.solve(np.full_like(rhs, np.nan), positions, np.repeat(gripped, 3),
+                np.tile(np.eye(3), (3, 1)), targets[gripped].reshape(-1), same_rhs=True)
+    np.testing.assert_allclose(positions, fresh, atol=1e-10)
 
 
 @pytest.mark.parametrize('name', sorted(BUILTIN_SCENARIOS))

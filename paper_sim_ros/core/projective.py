@@ -641,6 +641,8 @@ class ConstrainedSolve:
         """The rows (vertex, direction arrays) whose S is factored in ``_lower``: the same
         rows come back for every iteration of a sub-step."""
         self._lower = np.zeros((0, 0))
+        self._unconstrained: np.ndarray | None = None
+        """x₀ = A⁻¹ b of the last solve (all vertices), for a solve again under other rows."""
 
     def missing_columns(self, vertices: np.ndarray) -> int:
         """How many of ``vertices`` (distinct) have no column yet: rows on them cost a
@@ -670,11 +672,20 @@ class ConstrainedSolve:
         self._column_count = needed
 
     def solve(self, rhs: np.ndarray, positions: np.ndarray, row_vertex: np.ndarray,
-              row_direction: np.ndarray, row_value: np.ndarray) -> np.ndarray:
+              row_direction: np.ndarray, row_value: np.ndarray,
+              same_rhs: bool = False) -> np.ndarray:
         """Overwrite the free vertices of ``positions`` with the solution under the rows
         (vertex, unit direction, value [m]); returns the multipliers λ (one per row; a row
-        pushes its vertex along its direction where λ < 0)."""
-        self.step.solve(rhs, positions)
+        pushes its vertex along its direction where λ < 0). ``same_rhs``: ``rhs`` and the
+        pinned vertices are those of the last call, only the rows changed, so x₀ is the
+        last call's: rows settled over several passes cost one solve, not one a pass."""
+        if same_rhs:
+            np.copyto(positions, self._unconstrained)
+        else:
+            self.step.solve(rhs, positions)
+            if self._unconstrained is None or self._unconstrained.shape != positions.shape:
+                self._unconstrained = np.empty_like(positions)
+            np.copyto(self._unconstrained, positions)
         if row_vertex.size == 0:
             return np.zeros(0)
         self._ensure_columns(row_vertex)

@@ -843,11 +843,11 @@ class Simulator:
                 or self._bending_step.missing_columns(held) \
                 > 3 * (TABLE_ITERATIONS - 1) * standing:
             return False
-        for _ in range(TABLE_ITERATIONS):
+        for iteration in range(TABLE_ITERATIONS):
             multipliers = self._bending_step.solve(
                 rhs, positions, np.concatenate([vertex, held]),
                 np.concatenate([direction, np.tile(TABLE_NORMAL, (held.size, 1))]),
-                np.concatenate([value, np.full(held.size, ground)]))
+                np.concatenate([value, np.full(held.size, ground)]), same_rhs=iteration > 0)
             push = -multipliers[vertex.size:]  # a row pushes along its direction where λ < 0
             solved = held
             below = eligible & (positions[:, 2] < ground - TABLE_TOLERANCE)
@@ -900,7 +900,7 @@ class Simulator:
         for _ in range(CONTACT_ROW_PASSES):
             if not self._settle_contact_rows(positions, multipliers):
                 return
-            multipliers = self._global_step.solve(rhs, positions, *self._rows)
+            multipliers = self._global_step.solve(rhs, positions, *self._rows, same_rhs=True)
 
     def _settle_contact_rows(self, positions, multipliers) -> bool:
         """Contact only pushes: a contact row that pulls its vertex towards the probe is let
