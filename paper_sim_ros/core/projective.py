@@ -679,11 +679,12 @@ class ConstrainedSolve:
         pushes its vertex along its direction where λ < 0). ``same_rhs``: ``rhs`` and the
         pinned vertices are those of the last call, only the rows changed, so x₀ is the
         last call's: rows settled over several passes cost one solve, not one a pass."""
-        if same_rhs:
+        known = self._unconstrained is not None and self._unconstrained.shape == positions.shape
+        if same_rhs and known:
             np.copyto(positions, self._unconstrained)
         else:
             self.step.solve(rhs, positions)
-            if self._unconstrained is None or self._unconstrained.shape != positions.shape:
+            if not known:
                 self._unconstrained = np.empty_like(positions)
             np.copyto(self._unconstrained, positions)
         if row_vertex.size == 0:
