@@ -244,6 +244,30 @@ def test_letting_go_of_a_squeeze_tears_the_sheet_no_further_than_the_squeeze(see
     assert letting_go < 1.1 * squeezing, (squeezing, letting_go)
 
 
+def test_deep_in_probes_names_the_probe_each_deep_vertex_is_deepest_in():
+    """The kernel behind a rising probe's rows (``Simulator._deep_in_rising_probes``)
+    against its definition in numpy: a vertex nearer than (1 - share) of a listed probe's
+    radius to its centre gets the listed probe whose surface it is deepest below (the
+    first of equals), an excluded vertex or one not that deep -1."""
+    rng = np.random.default_rng(3)
+    positions = rng.uniform(-0.015, 0.025, (2000, 3))
+    positions[:4] = [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.005, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    centers = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.02, 0.02, 0.0]])
+    radii = np.array([0.012, 0.012, 0.01])
+    probes = np.array([0, 1])  # the third probe is not rising
+    excluded = np.zeros(len(positions), dtype=bool)
+    excluded[3] = True
+    deep_in = np.empty(len(positions), dtype=np.int64)
+    kernels.deep_in_probes(positions, centers, radii, probes, 0.5, excluded, deep_in)
+    distance = np.linalg.norm(positions[:, None, :] - centers[None, probes], axis=2)
+    deep = np.any(distance < 0.5 * radii[None, probes], axis=1) & ~excluded
+    expected = np.full(len(positions), -1)
+    expected[deep] = probes[np.argmin(distance[deep] - radii[None, probes], axis=1)]
+    np.testing.assert_array_equal(deep_in, expected)
+    assert list(deep_in[:4]) == [0, 1, 0, -1]  # the third: equally deep in both
+    assert np.count_nonzero(deep_in == 0) > 5 and np.count_nonzero(deep_in == 1) > 5
+
+
 @pytest.mark.parametrize('radius', [0.005, 0.003])
 def test_a_probe_smaller_than_the_cells_pushes_the_sheet_instead_of_passing_through(radius):
     """`poke` at 33² (cells 6.6 x 9.3 mm) with a probe of 5 or 3 mm radius: it fits between

@@ -755,6 +755,31 @@ def inside_probes(positions, probe_center, probe_radius, probe_active, ground_he
 
 
 @njit(cache=True)
+def deep_in_probes(positions, probe_center, probe_radius, probes, depth_share, excluded,
+                   deep_in):
+    """``deep_in``: for each vertex not ``excluded`` that is nearer than (1 − depth_share)
+    of its radius to the centre of one of ``probes`` (indices), the one of them whose
+    surface it is deepest below (the first of equals); -1 elsewhere."""
+    for v in range(positions.shape[0]):
+        deep_in[v] = -1
+        if excluded[v]:
+            continue
+        deep = False
+        deepest = np.inf
+        for p in probes:
+            dx = positions[v, 0] - probe_center[p, 0]
+            dy = positions[v, 1] - probe_center[p, 1]
+            dz = positions[v, 2] - probe_center[p, 2]
+            distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+            deep = deep or distance < (1.0 - depth_share) * probe_radius[p]
+            if distance - probe_radius[p] < deepest:
+                deepest = distance - probe_radius[p]
+                deep_in[v] = p
+        if not deep:
+            deep_in[v] = -1
+
+
+@njit(cache=True)
 def contact_rows_hold(positions, probe_center, probe_radius, probe_active, ground_height,
                       ground_enabled, tolerance, pinned, row_vertex, row_is_contact,
                       multipliers):

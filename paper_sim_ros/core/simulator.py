@@ -1002,12 +1002,9 @@ class Simulator:
         deep_in = np.full(positions.shape[0], -1)
         rising = np.flatnonzero(self._rising_probes)
         if rising.size:
-            distance = np.linalg.norm(positions[:, None, :] - self._probe_to[None, rising],
-                                      axis=2)
-            radius = self.probes.radius[None, rising]
-            deep = np.any(distance < (1.0 - DEEP_IN_RISING_PROBE) * radius, axis=1)
-            deep[self.sheet.pinned | (self._grip_probe >= 0)] = False
-            deep_in[deep] = rising[np.argmin(distance[deep] - radius, axis=1)]
+            kernels.deep_in_probes(positions, self._probe_to, self.probes.radius, rising,
+                                   DEEP_IN_RISING_PROBE,
+                                   self.sheet.pinned | (self._grip_probe >= 0), deep_in)
         return deep_in
 
     def _rising_contact_planes(self, vertices, probe):
