@@ -181,6 +181,67 @@ def test_a_fold_replaces_the_bend_spring_and_stays():
     assert model.folds == folds and np.sum(sheet.spring_kind == AUX) == aux.size
 
 
+def squashed_sheet(squash: float, extra: bool = False):
+    """A 41² sheet, 0.2 m square, whose left half is squashed along x by ``squash`` (its
+    x-running HINGE springs there compressed by it, those along y not); with ``extra``, one
+    x-running spring at the right edge too, two cells away from the rest."""
+    sheet = build_flat_sheet(SheetConfig(nx=41, ny=41, width=0.2, height=0.2))
+    x = sheet.material[:, 0]
+    left = x < -0.05
+    sheet.positions[left, 0] = -0.05 + (x[left] + 0.05) * (1.0 - squash)
+    if extra:
+        edge = np.flatnonzero(np.isclose(x, x.max()) & np.isclose(sheet.material[:, 1], 0.0))
+        sheet.positions[edge, 0] -= squash * 0.005  # the cell is 5 mm wide
+    return sheet
+
+
+def broken_pairs(model: DamageModel) -> set:
+    return {(min(i, j), max(i, j)) for i, _, j in model.creases}
+
+
+@pytest.mark.parametrize('fragility, squash', [(1.0, 0.6), (2.0, 0.7)])
+def test_eq_7_breaks_a_spring_compressed_at_a_check_with_its_probability(fragility, squash):
+    """At one check a spring compressed by c breaks with probability P = c^φ (Eq. 7): of
+    the 410 x-running HINGE springs of the squashed half, P (0.6 and 0.49 here) of them
+    break, within three standard deviations. This checks the hazard's scale: drawn as
+    E < P instead of E < −ln(1 − P), 45 % and 39 % would break."""
+    probability = squash ** fragility
+    sheet = squashed_sheet(squash)
+    model = DamageModel(DamageConfig(fragility=fragility, max_vertices=10**6), seed=4,
+                        aux_stiffness=3e4, held_inextensible=False)
+    candidates = int(np.sum((model.compression(sheet) > 0.1) & (sheet.spring_kind == HINGE)
+                            & (sheet.material[sheet.spring_vertices[:, 0], 1]
+                               == sheet.material[sheet.spring_vertices[:, 1], 1])))
+    material = sheet.material.copy()
+    model.check(sheet)
+    # the diagonals, compressed less, break too: count the x-running springs only
+    broken = sum(material[i, 1] == material[j, 1] for i, j in broken_pairs(model))
+    assert candidates == 410
+    spread = 3.0 * math.sqrt(probability * (1.0 - probability) / candidates)
+    assert abs(broken / candidates - probability) < spread, (broken, candidates)
+    assert mesh_problems(sheet) == []
+
+
+def test_which_springs_break_does_not_hinge_on_the_other_candidates():
+    """Each spring breaks when its own compression takes its own seeded threshold: a
+    sheet with one more compressed spring elsewhere breaks the same springs in the
+    squashed half, check after check: 100 of them and the extra one. (Drawn afresh per
+    candidate and check, the one extra draw shifted every later one: 69 of the 99 breaks
+    of the plain sheet were not among the other's.)"""
+    models, sheets = [], []
+    for extra in (False, True):
+        sheets.append(squashed_sheet(0.06, extra))
+        models.append(DamageModel(DamageConfig(max_vertices=10**6), seed=7,
+                                  aux_stiffness=3e4, held_inextensible=False))
+    for _ in range(3):
+        for model, sheet in zip(models, sheets):
+            model.check(sheet)
+    plain, other = (broken_pairs(model) for model in models)
+    assert len(plain) > 20
+    extra_springs = other - plain
+    assert plain <= other and len(extra_springs) <= 1, (len(plain), len(extra_springs))
+
+
 # -------------------------------------------------------------- invariants, property-style
 @pytest.mark.slow
 def test_tens_of_thousands_of_random_breaks_and_folds_keep_the_mesh_valid():
@@ -309,12 +370,13 @@ def test_squeeze_keeps_its_damage_and_rubber_springs_back(squeeze):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize('seed', [0, 1, 3])
+@pytest.mark.parametrize('seed', [0, 1, 4])
 def test_a_break_never_puts_its_vertex_into_a_fingertip_or_under_the_table(seed):
     """A break lifts its new vertex to the side the sheet bulges; in the squeeze that side
     was at times inside a fingertip (33², seeds 0, 1, 3: 2.5, 2.2, 2.6 mm deep) or under
     the table (65², seed 0: 0.6 mm), the squeeze's only penetrations. Issue 13 asks no
-    vertex deeper than 0.5 mm; now none is (Simulator._keep_creases_out)."""
+    vertex deeper than 0.5 mm; now none is (Simulator._keep_creases_out). Seeds whose
+    squeeze breaks (1, 3 and 8 breaks since Eq. 7 is drawn as a hazard; seed 3 none)."""
     scenario = scenario_from_mapping(with_overrides(squeeze_mapping(33), seed=seed,
                                                     duration=3.0))
     simulator = build_simulator(scenario)

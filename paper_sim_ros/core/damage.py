@@ -2,12 +2,20 @@
 break, which hinges fold, and random crumpling.
 
 ``DamageModel`` decides, at a fixed rate in simulated time (``DamageConfig.check_rate``,
-independent of the sub-steps), which HINGE springs break (Eq. 7: P = (1 − r)^φ, drawn from
-a seeded generator, most compressed first) and which interior edges fold (their BEND
+independent of the sub-steps), which HINGE springs break (Eq. 7: P = (1 − r)^φ at each
+check, most compressed first) and which interior edges fold (their BEND
 spring came short of ``fold_threshold``), and has ``MeshEditor`` (core/mesh_editing.py)
 apply them. Which compression 1 − r Eq. 7 sees depends on the solver:
 core/probe_compression.py. A break remembers the crease as if the spring had been pushed
 to l_t = max(r, ``min_crease_ratio``)·l0.
+
+Eq. 7 is drawn as a hazard (a decision the paper leaves open): each spring gets one
+threshold E ~ Exp(1), seeded and in the order the springs are made, and breaks at the
+first check where its accumulated −Σ ln(1 − P) reaches E. Surviving n checks then has
+probability Π (1 − P), exactly as with a fresh uniform draw per candidate and check, but
+which springs break depends only on how each one is pushed, not on how many draws the
+other candidates took before it: a sub-step count or grip that adds or drops one
+candidate somewhere no longer redraws every later break (docs/solver.md, "Damage").
 """
 from __future__ import annotations
 
@@ -47,6 +55,15 @@ class DamageModel:
         self.aux_stiffness = aux_stiffness
         self.held_inextensible = held_inextensible
         self.rng = np.random.default_rng([seed, 0x0DA3A6E])
+        """The random side a break on a flat sheet folds to."""
+        self._thresholds = np.random.default_rng([seed, 0xB4EA7])
+        """Eq. 7's thresholds: the k-th spring made takes the k-th draw."""
+        self._rethresholds = np.random.default_rng([seed, 0xB4EA8])
+        """A broken spring's half keeps its index and takes its next threshold from here."""
+        self.break_threshold = np.zeros(0)
+        """(S,) each spring's E ~ Exp(1): it breaks once ``break_hazard`` reaches it."""
+        self.break_hazard = np.zeros(0)
+        """(S,) −Σ ln(1 − P) over the checks that found the spring compressed."""
         self.breaks = 0
         self.folds = 0
         self.creases: list[tuple[int, int, int]] = []
@@ -97,11 +114,12 @@ class DamageModel:
             sheet.spring_rest_length[compressed], sheet.pinned, config.min_breakable_length)]
         broken = np.zeros(0, dtype=np.int64)
         if candidates.size:
+            self._draw_thresholds(sheet.spring_count)
             probability = np.minimum(compression[candidates], 1.0) ** config.fragility
-            if periods > 1:
-                probability = 1.0 - (1.0 - probability) ** periods
-            draw = self.rng.random(candidates.size)
-            broken = candidates[draw < probability]
+            with np.errstate(divide='ignore'):  # P = 1: an infinite hazard, it breaks
+                self.break_hazard[candidates] -= periods * np.log1p(-probability)
+            broken = candidates[self.break_hazard[candidates]
+                                >= self.break_threshold[candidates]]
             # most compressed first; a stable order keeps the run reproducible
             broken = broken[np.argsort(-compression[broken], kind='stable')]
         folding = springs_shorter_than(sheet.positions, sheet.spring_vertices,
@@ -121,6 +139,9 @@ class DamageModel:
             crease = ratio * float(sheet.spring_rest_length[spring])
             editor.break_spring(spring, crease, self.rng, config.area_conservation)
             self.breaks += 1
+            # its index now holds one of its halves: a new spring, with a new threshold
+            self.break_hazard[spring] = 0.0
+            self.break_threshold[spring] = self._rethresholds.exponential()
         for spring in folding.tolist():
             if self.capped:
                 break
@@ -134,6 +155,16 @@ class DamageModel:
             editor.commit()
             self.creases += editor.creases
         return editor.changed
+
+    def _draw_thresholds(self, spring_count: int) -> None:
+        """Thresholds (and no hazard yet) for the springs made since the last call:
+        springs are only ever appended, so the k-th spring made always gets the k-th
+        draw of its generator."""
+        new = spring_count - self.break_threshold.size
+        if new > 0:
+            self.break_threshold = np.concatenate([self.break_threshold,
+                                                   self._thresholds.exponential(size=new)])
+            self.break_hazard = np.concatenate([self.break_hazard, np.zeros(new)])
 
     def _at_cap(self, vertex_count: int) -> bool:
         if vertex_count >= self.config.max_vertices:
