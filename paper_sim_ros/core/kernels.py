@@ -782,11 +782,13 @@ def deep_in_probes(positions, probe_center, probe_radius, probes, depth_share, e
 @njit(cache=True)
 def contact_rows_hold(positions, probe_center, probe_radius, probe_active, ground_height,
                       ground_enabled, tolerance, pinned, row_vertex, row_is_contact,
-                      multipliers):
-    """Whether a solve's probe rows stand as they are: every contact row pushes (λ ≤ 0)
-    and no free vertex without a row sits deeper than ``tolerance`` [m] inside an active
-    probe (Simulator._settle_contact_rows, which changes the rows otherwise). One pass and
-    no allocation but a mark per vertex: most iterations leave the rows alone."""
+                      multipliers, rising, depth_share, gripped):
+    """Whether a solve's probe rows stand as they are: every contact row pushes (λ ≤ 0),
+    no free vertex without a row sits deeper than ``tolerance`` [m] inside an active probe,
+    and none but a gripped one nearer than (1 − depth_share) of its radius to the centre of
+    one of the ``rising`` probes (indices; ``deep_in_probes``). Simulator.
+    _settle_contact_rows changes the rows otherwise. One pass and no allocation but a mark
+    per vertex: most iterations leave the rows alone."""
     for r in range(row_vertex.shape[0]):
         if row_is_contact[r] and not multipliers[r] <= 0.0:
             return False
@@ -799,6 +801,14 @@ def contact_rows_hold(positions, probe_center, probe_radius, probe_active, groun
         if _probe_depth(positions, v, probe_center, probe_radius, probe_active,
                         ground_height, ground_enabled) > tolerance:
             return False
+        if gripped[v]:
+            continue
+        for p in rising:
+            dx = positions[v, 0] - probe_center[p, 0]
+            dy = positions[v, 1] - probe_center[p, 1]
+            dz = positions[v, 2] - probe_center[p, 2]
+            if np.sqrt(dx * dx + dy * dy + dz * dz) < (1.0 - depth_share) * probe_radius[p]:
+                return False
     return True
 
 

@@ -913,13 +913,15 @@ class Simulator:
             return False
         vertex, direction, value = self._rows
         contact = self.config.contact
-        deep_in = self._deep_in_rising_probes(positions)
-        deep_in[vertex] = -1
-        if not np.any(deep_in >= 0) and kernels.contact_rows_hold(
+        if kernels.contact_rows_hold(
                 positions, self._probe_to, self.probes.radius, self._free_probes,
                 contact.ground_height, contact.ground_enabled, CONTACT_TOLERANCE,
-                self.sheet.pinned, vertex, self._row_kind == CONTACT_ROW, multipliers):
+                self.sheet.pinned, vertex, self._row_kind == CONTACT_ROW, multipliers,
+                np.flatnonzero(self._rising_probes), DEEP_IN_RISING_PROBE,
+                self._grip_probe >= 0):
             return False
+        deep_in = self._deep_in_rising_probes(positions)
+        deep_in[vertex] = -1
         keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
         inside = self._inside_probes(positions)
         inside[vertex] = False
