@@ -754,29 +754,34 @@ def inside_probes(positions, probe_center, probe_radius, probe_active, ground_he
                                  ground_height, ground_enabled) > tolerance
 
 
+@njit(cache=True, inline='always')
+def _deepest_probe(positions, v, probe_center, probe_radius, probes, depth_share):
+    """The one of ``probes`` (indices) whose surface vertex v is deepest below (the first
+    of equals), if v is nearer than (1 − depth_share) of its radius to the centre of one
+    of them; else -1."""
+    deep = False
+    deepest = np.inf
+    found = -1
+    for p in probes:
+        dx = positions[v, 0] - probe_center[p, 0]
+        dy = positions[v, 1] - probe_center[p, 1]
+        dz = positions[v, 2] - probe_center[p, 2]
+        distance = np.sqrt(dx * dx + dy * dy + dz * dz)
+        deep = deep or distance < (1.0 - depth_share) * probe_radius[p]
+        if distance - probe_radius[p] < deepest:
+            deepest = distance - probe_radius[p]
+            found = p
+    return found if deep else -1
+
+
 @njit(cache=True)
 def deep_in_probes(positions, probe_center, probe_radius, probes, depth_share, excluded,
                    deep_in):
-    """``deep_in``: for each vertex not ``excluded`` that is nearer than (1 − depth_share)
-    of its radius to the centre of one of ``probes`` (indices), the one of them whose
-    surface it is deepest below (the first of equals); -1 elsewhere."""
+    """``deep_in``: for each vertex not ``excluded``, ``_deepest_probe`` of ``probes``; -1
+    for the excluded."""
     for v in range(positions.shape[0]):
-        deep_in[v] = -1
-        if excluded[v]:
-            continue
-        deep = False
-        deepest = np.inf
-        for p in probes:
-            dx = positions[v, 0] - probe_center[p, 0]
-            dy = positions[v, 1] - probe_center[p, 1]
-            dz = positions[v, 2] - probe_center[p, 2]
-            distance = np.sqrt(dx * dx + dy * dy + dz * dz)
-            deep = deep or distance < (1.0 - depth_share) * probe_radius[p]
-            if distance - probe_radius[p] < deepest:
-                deepest = distance - probe_radius[p]
-                deep_in[v] = p
-        if not deep:
-            deep_in[v] = -1
+        deep_in[v] = -1 if excluded[v] else _deepest_probe(
+            positions, v, probe_center, probe_radius, probes, depth_share)
 
 
 @njit(cache=True)
@@ -786,7 +791,7 @@ def contact_rows_hold(positions, probe_center, probe_radius, probe_active, groun
     """Whether a solve's probe rows stand as they are: every contact row pushes (λ ≤ 0),
     no free vertex without a row sits deeper than ``tolerance`` [m] inside an active probe,
     and none but a gripped one nearer than (1 − depth_share) of its radius to the centre of
-    one of the ``rising`` probes (indices; ``deep_in_probes``). Simulator.
+    one of the ``rising`` probes (indices; ``_deepest_probe``). Simulator.
     _settle_contact_rows changes the rows otherwise. One pass and no allocation but a mark
     per vertex: most iterations leave the rows alone."""
     for r in range(row_vertex.shape[0]):
@@ -801,14 +806,9 @@ def contact_rows_hold(positions, probe_center, probe_radius, probe_active, groun
         if _probe_depth(positions, v, probe_center, probe_radius, probe_active,
                         ground_height, ground_enabled) > tolerance:
             return False
-        if gripped[v]:
-            continue
-        for p in rising:
-            dx = positions[v, 0] - probe_center[p, 0]
-            dy = positions[v, 1] - probe_center[p, 1]
-            dz = positions[v, 2] - probe_center[p, 2]
-            if np.sqrt(dx * dx + dy * dy + dz * dz) < (1.0 - depth_share) * probe_radius[p]:
-                return False
+        if not gripped[v] and _deepest_probe(positions, v, probe_center, probe_radius,
+                                             rising, depth_share) >= 0:
+            return False
     return True
 
 
