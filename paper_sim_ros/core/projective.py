@@ -223,6 +223,29 @@ def _terms_fit_pattern(pointer, index, rows, entries) -> bool:
 
 
 @njit(cache=True)
+def _update_work_within(pointer, index, rows, entries, coefficients, limit) -> bool:
+    """Whether _rank_one_updates of these terms reads at most ``limit`` factor entries
+    (each term walks its elimination-tree path and reads every entry of the columns on
+    it). Stops counting at the limit, so its own cost stays a fraction of the updates'."""
+    work = 0
+    for t in range(coefficients.shape[0]):
+        if coefficients[t] == 0.0:
+            continue
+        j = -1
+        for k in range(rows.shape[1]):
+            if entries[t, k] != 0.0:
+                j = rows[t, k] if j < 0 else min(j, rows[t, k])
+        while j >= 0:
+            first = pointer[j]
+            last = pointer[j + 1]
+            work += last - first + 1
+            if work > limit:
+                return False
+            j = index[first] if first < last else -1
+    return True
+
+
+@njit(cache=True)
 def _rank_one_updates(pointer, index, value, diagonal, rows, entries, coefficients, work):
     """L D Lᵀ += c v vᵀ for each term in turn (an update where c > 0, a downdate where
     c < 0: Gill, Golub, Murray & Saunders 1974, method C1), only along the elimination-tree
@@ -312,7 +335,9 @@ class GlobalStep:
         pointer, index, value, diagonal, permutation = self._factors
         position[self.free] = permutation
         rows = position[vertices]
-        if np.any(rows < 0) or not _terms_fit_pattern(pointer, index, rows, values):
+        if np.any(rows < 0) or not _terms_fit_pattern(pointer, index, rows, values) \
+                or not _update_work_within(pointer, index, rows, values, coefficients,
+                                           UPDATE_WORK_LIMIT * index.size):
             return None
         # updates before downdates: every matrix on the way is then positive definite
         order = np.argsort(-coefficients, kind='stable')
@@ -341,6 +366,13 @@ IN_PLACE_TERMS = 1.0
 """A factor updated in place is made anew once it has taken this many rank-one terms per
 unknown: downdates lose digits (squeeze, 129²: a known x solved to 1.5e-9 after 17 190
 terms; bench/bench_damage.py drift)."""
+UPDATE_WORK_LIMIT = 40.0
+"""A change updates a factor in place only while its terms' paths read at most this many
+times the factor's entries: a factorisation costs about 85-165 times them in the
+updates' time per entry read (33², 65², 129², either system), and the paths of a change
+of a few thousand terms (a check that folds many hinges at once) read 490 times them:
+327 ms against a new factor's 47 (squeeze, 65²). Counted, not timed: a run stays
+deterministic."""
 MAX_UPDATE_VERTICES = 64
 """A changed mesh reuses the last factor while its change touches at most this many
 vertices (UpdatedStep); beyond, it is factored afresh."""
