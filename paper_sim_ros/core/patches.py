@@ -217,26 +217,16 @@ def _patch_frame(positions, stencil, tangents, p, frame):
 
 
 @njit(cache=True)
-def _couple(stencil, rows, p, vertex_values, patch_values, to_patch):
-    """The patch's rows between its vertices and itself: ``patch_values`` (ROWS, 3) +=
-    Σ c x over ``vertex_values`` (``to_patch``), or back, ``vertex_values`` += c t."""
+def _second_derivatives(positions, stencil, rows, p, out):
+    """The patch's rows applied to ``positions``: (ROWS, 3) into ``out`` [1/m]."""
+    out[:] = 0.0
     for slot in range(stencil.shape[1]):
         w = stencil[p, slot]
         if w < 0:
             break
         for k in range(ROWS):
             for axis in range(3):
-                if to_patch:
-                    patch_values[k, axis] += rows[p, k, slot] * vertex_values[w, axis]
-                else:
-                    vertex_values[w, axis] += rows[p, k, slot] * patch_values[k, axis]
-
-
-@njit(cache=True)
-def _second_derivatives(positions, stencil, rows, p, out):
-    """The patch's rows applied to ``positions``: (ROWS, 3) into ``out`` [1/m]."""
-    out[:] = 0.0
-    _couple(stencil, rows, p, positions, out, True)
+                out[k, axis] += rows[p, k, slot] * positions[w, axis]
 
 
 @njit(cache=True)
