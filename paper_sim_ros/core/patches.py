@@ -207,43 +207,44 @@ def _patch_axes(positions, stencil, tangents, p):
             ta1 * tb2 - ta2 * tb1, ta2 * tb0 - ta0 * tb2, ta0 * tb1 - ta1 * tb0)
 
 
-@njit(cache=True)
-def _patch_frame(positions, stencil, tangents, p, frame):
-    """The patch's frame (_patch_axes) into ``frame`` rows."""
-    axes = _patch_axes(positions, stencil, tangents, p)
-    for row in range(3):
-        for axis in range(3):
-            frame[row, axis] = axes[3 * row + axis]
+assert ROWS == 2, 'the patches\' kernels write out two rows'
 
 
-@njit(cache=True)
-def _second_derivatives(positions, stencil, rows, p, out):
-    """The patch's rows applied to ``positions``: (ROWS, 3) into ``out`` [1/m]."""
-    out[:] = 0.0
+@njit(cache=True, inline='always')
+def _second_derivatives(positions, stencil, rows, p):
+    """The patch's two rows applied to ``positions`` [1/m], as six scalars (row 0's x y z,
+    then row 1's)."""
+    s00 = s01 = s02 = 0.0
+    s10 = s11 = s12 = 0.0
     for slot in range(stencil.shape[1]):
         w = stencil[p, slot]
         if w < 0:
             break
-        for k in range(ROWS):
-            for axis in range(3):
-                out[k, axis] += rows[p, k, slot] * positions[w, axis]
+        c0 = rows[p, 0, slot]
+        c1 = rows[p, 1, slot]
+        x0 = positions[w, 0]
+        x1 = positions[w, 1]
+        x2 = positions[w, 2]
+        s00 += c0 * x0
+        s01 += c0 * x1
+        s02 += c0 * x2
+        s10 += c1 * x0
+        s11 += c1 * x1
+        s12 += c1 * x2
+    return s00, s01, s02, s10, s11, s12
 
 
 @njit(cache=True)
 def patch_rest_state(positions, stencil, rows, tangents, patches, rest):
     """Each patch's second derivatives at ``positions`` in its frame, into ``rest``."""
-    frame = np.empty((3, 3))
-    second = np.empty((ROWS, 3))
     for p in patches:
-        _patch_frame(positions, stencil, tangents, p, frame)
-        _second_derivatives(positions, stencil, rows, p, second)
+        axes = _patch_axes(positions, stencil, tangents, p)
+        second = _second_derivatives(positions, stencil, rows, p)
         for k in range(ROWS):
             for row in range(3):
-                rest[p, k, row] = (frame[row, 0] * second[k, 0] + frame[row, 1] * second[k, 1]
-                                   + frame[row, 2] * second[k, 2])
-
-
-assert ROWS == 2, 'add_patch_targets writes out two rows'
+                rest[p, k, row] = (axes[3 * row] * second[3 * k]
+                                   + axes[3 * row + 1] * second[3 * k + 1]
+                                   + axes[3 * row + 2] * second[3 * k + 2])
 
 
 @njit(cache=True)
@@ -277,17 +278,15 @@ def add_patch_targets(positions, stencil, rows, tangents, weight, rest, patches,
 @njit(cache=True)
 def patch_energy(positions, stencil, rows, tangents, weight, rest, patches):
     """Σ ½ w |x'' − R r|² over the listed patches [J]."""
-    frame = np.empty((3, 3))
-    second = np.empty((ROWS, 3))
     total = 0.0
     for p in patches:
-        _patch_frame(positions, stencil, tangents, p, frame)
-        _second_derivatives(positions, stencil, rows, p, second)
+        axes = _patch_axes(positions, stencil, tangents, p)
+        second = _second_derivatives(positions, stencil, rows, p)
         for k in range(ROWS):
             for axis in range(3):
-                turned = (rest[p, k, 0] * frame[0, axis] + rest[p, k, 1] * frame[1, axis]
-                          + rest[p, k, 2] * frame[2, axis])
-                total += 0.5 * weight[p] * (second[k, axis] - turned) ** 2
+                turned = (rest[p, k, 0] * axes[axis] + rest[p, k, 1] * axes[3 + axis]
+                          + rest[p, k, 2] * axes[6 + axis])
+                total += 0.5 * weight[p] * (second[3 * k + axis] - turned) ** 2
     return total
 
 
@@ -326,17 +325,15 @@ def patches_beyond(positions, stencil, rows, tangents, rest, patches, yield_curv
     curvatures (their rows' components along their normal) depart from their rest ones by
     more than it. The rows' components in the sheet's plane are the grid stretched or
     sheared, not bent."""
-    frame = np.empty((3, 3))
-    second = np.empty((ROWS, 3))
     beyond = np.zeros(patches.size, dtype=np.bool_)
     for index in range(patches.size):
         p = patches[index]
-        _second_derivatives(positions, stencil, rows, p, second)
-        _patch_frame(positions, stencil, tangents, p, frame)
+        second = _second_derivatives(positions, stencil, rows, p)
+        axes = _patch_axes(positions, stencil, tangents, p)
         excess = 0.0
         for k in range(ROWS):
-            normal = (frame[2, 0] * second[k, 0] + frame[2, 1] * second[k, 1]
-                      + frame[2, 2] * second[k, 2])
+            normal = (axes[6] * second[3 * k] + axes[7] * second[3 * k + 1]
+                      + axes[8] * second[3 * k + 2])
             excess += (normal - rest[p, k, 2]) ** 2
         beyond[index] = np.sqrt(excess) > yield_curvature
     return beyond
