@@ -169,51 +169,14 @@ def patches_standing(stencil: np.ndarray, is_cell: np.ndarray, triangles: np.nda
     return np.where(is_cell, cells_present, edges_present)
 
 
-@njit(cache=True, inline='always')
-def _patch_axes(positions, stencil, tangents, p):
-    """The patch's frame as nine scalars: unit x_a, x_b made orthogonal to it, their
-    normal. Scalars, not a small array: an array here is a heap allocation or a store and
-    reload per patch, and that was most of the local step's time (65², aged)."""
-    ta0 = ta1 = ta2 = 0.0
-    tb0 = tb1 = tb2 = 0.0
-    for slot in range(stencil.shape[1]):
-        w = stencil[p, slot]
-        if w < 0:
-            break
-        ca = tangents[p, 0, slot]
-        cb = tangents[p, 1, slot]
-        x0 = positions[w, 0]
-        x1 = positions[w, 1]
-        x2 = positions[w, 2]
-        ta0 += ca * x0
-        ta1 += ca * x1
-        ta2 += ca * x2
-        tb0 += cb * x0
-        tb1 += cb * x1
-        tb2 += cb * x2
-    inverse = 1.0 / max(np.sqrt(ta0 * ta0 + ta1 * ta1 + ta2 * ta2), 1e-300)
-    ta0 *= inverse
-    ta1 *= inverse
-    ta2 *= inverse
-    along = tb0 * ta0 + tb1 * ta1 + tb2 * ta2
-    tb0 -= along * ta0
-    tb1 -= along * ta1
-    tb2 -= along * ta2
-    inverse = 1.0 / max(np.sqrt(tb0 * tb0 + tb1 * tb1 + tb2 * tb2), 1e-300)
-    tb0 *= inverse
-    tb1 *= inverse
-    tb2 *= inverse
-    return (ta0, ta1, ta2, tb0, tb1, tb2,
-            ta1 * tb2 - ta2 * tb1, ta2 * tb0 - ta0 * tb2, ta0 * tb1 - ta1 * tb0)
-
-
 assert ROWS == 2, 'the patches\' kernels write out two rows'
 
 
 @njit(cache=True, inline='always')
-def _second_derivatives(positions, stencil, rows, p):
-    """The patch's two rows applied to ``positions`` [1/m], as six scalars (row 0's x y z,
-    then row 1's)."""
+def _stencil_sums(positions, stencil, rows, p):
+    """Two rows of stencil coefficients (``rows`` (P, 2, PATCH_WIDTH): the patch's second
+    derivatives [1/m], or its ``tangents``) applied to ``positions``, as six scalars (row
+    0's x y z, then row 1's)."""
     s00 = s01 = s02 = 0.0
     s10 = s11 = s12 = 0.0
     for slot in range(stencil.shape[1]):
@@ -234,12 +197,34 @@ def _second_derivatives(positions, stencil, rows, p):
     return s00, s01, s02, s10, s11, s12
 
 
+@njit(cache=True, inline='always')
+def _patch_axes(positions, stencil, tangents, p):
+    """The patch's frame as nine scalars: unit x_a, x_b made orthogonal to it, their
+    normal. Scalars, not a small array: an array here is a heap allocation or a store and
+    reload per patch, and that was most of the local step's time (65², aged)."""
+    ta0, ta1, ta2, tb0, tb1, tb2 = _stencil_sums(positions, stencil, tangents, p)
+    inverse = 1.0 / max(np.sqrt(ta0 * ta0 + ta1 * ta1 + ta2 * ta2), 1e-300)
+    ta0 *= inverse
+    ta1 *= inverse
+    ta2 *= inverse
+    along = tb0 * ta0 + tb1 * ta1 + tb2 * ta2
+    tb0 -= along * ta0
+    tb1 -= along * ta1
+    tb2 -= along * ta2
+    inverse = 1.0 / max(np.sqrt(tb0 * tb0 + tb1 * tb1 + tb2 * tb2), 1e-300)
+    tb0 *= inverse
+    tb1 *= inverse
+    tb2 *= inverse
+    return (ta0, ta1, ta2, tb0, tb1, tb2,
+            ta1 * tb2 - ta2 * tb1, ta2 * tb0 - ta0 * tb2, ta0 * tb1 - ta1 * tb0)
+
+
 @njit(cache=True)
 def patch_rest_state(positions, stencil, rows, tangents, patches, rest):
     """Each patch's second derivatives at ``positions`` in its frame, into ``rest``."""
     for p in patches:
         axes = _patch_axes(positions, stencil, tangents, p)
-        second = _second_derivatives(positions, stencil, rows, p)
+        second = _stencil_sums(positions, stencil, rows, p)
         for k in range(ROWS):
             for row in range(3):
                 rest[p, k, row] = (axes[3 * row] * second[3 * k]
@@ -281,7 +266,7 @@ def patch_energy(positions, stencil, rows, tangents, weight, rest, patches):
     total = 0.0
     for p in patches:
         axes = _patch_axes(positions, stencil, tangents, p)
-        second = _second_derivatives(positions, stencil, rows, p)
+        second = _stencil_sums(positions, stencil, rows, p)
         for k in range(ROWS):
             for axis in range(3):
                 turned = (rest[p, k, 0] * axes[axis] + rest[p, k, 1] * axes[3 + axis]
@@ -297,20 +282,10 @@ def departure_bounds(positions, stencil, rows, rest, patches):
     bounds = np.empty(patches.size)
     for index in range(patches.size):
         p = patches[index]
+        second = _stencil_sums(positions, stencil, rows, p)
         total = 0.0
-        for k in range(ROWS):
-            sx = 0.0
-            sy = 0.0
-            sz = 0.0
-            for slot in range(stencil.shape[1]):
-                w = stencil[p, slot]
-                if w < 0:
-                    break
-                c = rows[p, k, slot]
-                sx += c * positions[w, 0]
-                sy += c * positions[w, 1]
-                sz += c * positions[w, 2]
-            total += sx * sx + sy * sy + sz * sz
+        for component in range(3 * ROWS):
+            total += second[component] * second[component]
         resting = 0.0
         for k in range(ROWS):
             for row in range(3):
@@ -328,7 +303,7 @@ def patches_beyond(positions, stencil, rows, tangents, rest, patches, yield_curv
     beyond = np.zeros(patches.size, dtype=np.bool_)
     for index in range(patches.size):
         p = patches[index]
-        second = _second_derivatives(positions, stencil, rows, p)
+        second = _stencil_sums(positions, stencil, rows, p)
         axes = _patch_axes(positions, stencil, tangents, p)
         excess = 0.0
         for k in range(ROWS):
