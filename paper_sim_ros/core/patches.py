@@ -303,14 +303,11 @@ def patches_beyond(positions, stencil, rows, tangents, rest, patches, yield_curv
     beyond = np.zeros(patches.size, dtype=np.bool_)
     for index in range(patches.size):
         p = patches[index]
-        second = _stencil_sums(positions, stencil, rows, p)
-        axes = _patch_axes(positions, stencil, tangents, p)
-        excess = 0.0
-        for k in range(ROWS):
-            normal = (axes[6] * second[3 * k] + axes[7] * second[3 * k + 1]
-                      + axes[8] * second[3 * k + 2])
-            excess += (normal - rest[p, k, 2]) ** 2
-        beyond[index] = np.sqrt(excess) > yield_curvature
+        s00, s01, s02, s10, s11, s12 = _stencil_sums(positions, stencil, rows, p)
+        _, _, _, _, _, _, n0, n1, n2 = _patch_axes(positions, stencil, tangents, p)
+        departure_0 = n0 * s00 + n1 * s01 + n2 * s02 - rest[p, 0, 2]
+        departure_1 = n0 * s10 + n1 * s11 + n2 * s12 - rest[p, 1, 2]
+        beyond[index] = np.sqrt(departure_0 ** 2 + departure_1 ** 2) > yield_curvature
     return beyond
 
 
