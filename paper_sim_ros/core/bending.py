@@ -137,13 +137,19 @@ def _curvature(positions, quads, weights, h):
 
 
 @njit(cache=True, inline='always')
+def _in_frame(axes, kx, ky, kz):
+    """World vector (kx, ky, kz) in the coordinates of a hinge's frame (_hinge_axes)."""
+    return (axes[0] * kx + axes[1] * ky + axes[2] * kz,
+            axes[3] * kx + axes[4] * ky + axes[5] * kz,
+            axes[6] * kx + axes[7] * ky + axes[8] * kz)
+
+
+@njit(cache=True, inline='always')
 def _curvature_in_frame(positions, quads, weights, h):
-    """κ of hinge ``h`` in its frame's coordinates, and the frame (_hinge_axes)."""
+    """κ of hinge ``h`` in its frame's coordinates."""
     axes = _hinge_axes(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3])
     kx, ky, kz = _curvature(positions, quads, weights, h)
-    return ((axes[0] * kx + axes[1] * ky + axes[2] * kz,
-             axes[3] * kx + axes[4] * ky + axes[5] * kz,
-             axes[6] * kx + axes[7] * ky + axes[8] * kz), axes)
+    return _in_frame(axes, kx, ky, kz)
 
 
 @njit(cache=True)
@@ -170,7 +176,8 @@ def hinge_rest_state(positions, quads, rigidity, weights, stiffness, rest_curvat
         weights[h, 3] = -1.0 / height_l
         ratio = 2.0 * edge_length / (height_r + height_l)  # |e|² / (A_r + A_l)
         stiffness[h] = rigidity * min(ratio, MAX_SHAPE_RATIO)
-        curvature, _ = _curvature_in_frame(positions, quads, weights, h)
+        kx, ky, kz = _curvature(positions, quads, weights, h)
+        curvature = _in_frame(axes, kx, ky, kz)
         for row in range(3):
             rest_curvature[h, row] = curvature[row]
 
@@ -179,7 +186,7 @@ def hinge_rest_state(positions, quads, rigidity, weights, stiffness, rest_curvat
 def hinge_shape_now(positions, quads, weights, hinges, rest_curvature):
     """κ of each of ``hinges`` at ``positions``, in its frame, into ``rest_curvature``."""
     for h in hinges:
-        curvature, _ = _curvature_in_frame(positions, quads, weights, h)
+        curvature = _curvature_in_frame(positions, quads, weights, h)
         for row in range(3):
             rest_curvature[h, row] = curvature[row]
 
@@ -204,7 +211,7 @@ def bending_energy(positions, quads, weights, stiffness, rest_curvature):
     """Σ ½ k |κ - R κ0|² [J]."""
     total = 0.0
     for h in range(quads.shape[0]):
-        curvature, _ = _curvature_in_frame(positions, quads, weights, h)
+        curvature = _curvature_in_frame(positions, quads, weights, h)
         total += 0.5 * stiffness[h] * ((curvature[0] - rest_curvature[h, 0]) ** 2
                                        + (curvature[1] - rest_curvature[h, 1]) ** 2
                                        + (curvature[2] - rest_curvature[h, 2]) ** 2)
@@ -240,7 +247,8 @@ def yield_hinges(positions, quads, weights, stiffness, rest_curvature, yield_cur
             rest_curvature[h, 0] ** 2 + rest_curvature[h, 1] ** 2 + rest_curvature[h, 2] ** 2)
         if bound <= yield_curvature * 0.25 * _edge_floor(positions, quads, h):
             continue
-        curvature, axes = _curvature_in_frame(positions, quads, weights, h)
+        axes = _hinge_axes(positions, quads[h, 0], quads[h, 1], quads[h, 2], quads[h, 3])
+        curvature = _in_frame(axes, kx, ky, kz)
         edge_length = axes[9]
         # the mean height of its triangles over the edge, (A_r + A_l) / |e| (each height
         # floored at |e| / 4, as for the stiffness): the angle a hinge across a cylinder of
