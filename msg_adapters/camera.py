@@ -24,6 +24,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+from numba import njit
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import Header
 
@@ -69,24 +70,40 @@ def camera_info(header: Header, config: CameraConfig) -> CameraInfo:
                       p=projection_matrix(config).ravel().tolist())
 
 
+@njit(cache=True)
+def _write_pixels(depth, u, v, label, hit, column_scale, row_scale, floats, octets):
+    """Each pixel's x y z u v (float32 at bytes 0-19), label (uint16, little endian, at 20)
+    and hit (uint8 at 22; the padding byte after it stays zero), in one pass."""
+    for row in range(depth.shape[0]):
+        for column in range(depth.shape[1]):
+            z = depth[row, column]
+            floats[row, column, 0] = z * column_scale[column]
+            floats[row, column, 1] = z * row_scale[row]
+            floats[row, column, 2] = z
+            floats[row, column, 3] = u[row, column]
+            floats[row, column, 4] = v[row, column]
+            octets[row, column, 20] = label[row, column] & 0xFF
+            octets[row, column, 21] = label[row, column] >> 8
+            octets[row, column, 22] = hit[row, column]
+
+
 def organized_cloud(header: Header, config: CameraConfig, frame: CameraFrame) -> PointCloud2:
     """height × width points back-projected from the depth image with the ground truth of
     each pixel (PIXEL_DTYPE); NaN where the pixel hits nothing."""
     data, points = message_data((config.height, config.width), PIXEL_DTYPE)
-    # written in place through views of the message's bytes, in float32: x y z u v at
-    # 0..16 and the label at 20 (uint16 word 10); back-projection as core.camera.back_project
-    as_float = points.view(np.float32).reshape(config.height, config.width, 6)
+    # written in place through views of the message's bytes, in float32 (back-projection
+    # as core.camera.back_project), in one pass: numpy's strided writes field by field
+    # took 8.6 ms at 640 x 480, this 3.8 ms (bench/bench_camera.py)
     column_scale = ((np.arange(config.width) - config.principal_x)
                     / config.focal_x).astype(np.float32)
     row_scale = ((np.arange(config.height) - config.principal_y)
                  / config.focal_y).astype(np.float32)
-    np.multiply(frame.depth, column_scale[None, :], out=as_float[:, :, 0])
-    np.multiply(frame.depth, row_scale[:, None], out=as_float[:, :, 1])
-    as_float[:, :, 2] = frame.depth
-    as_float[:, :, 3] = frame.u
-    as_float[:, :, 4] = frame.v
-    points['label'] = frame.label
-    points['hit'] = frame.hit
+    _write_pixels(frame.depth.astype(np.float32, copy=False),
+                  frame.u.astype(np.float32, copy=False), frame.v.astype(np.float32, copy=False),
+                  frame.label.astype(np.uint16, copy=False), frame.hit.astype(np.uint8, copy=False),
+                  column_scale, row_scale,
+                  points.view(np.float32).reshape(config.height, config.width, 6),
+                  points.view(np.uint8).reshape(config.height, config.width, 24))
     cloud = PointCloud2(
         header=header, height=config.height, width=config.width,
         fields=point_fields(PIXEL_DTYPE), is_bigendian=False,

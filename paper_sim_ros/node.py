@@ -280,7 +280,11 @@ class PaperSimNode(Node):
         simulator.set_probes(center[None, :], np.array([0.01]), np.array([True]))
         simulator.step_frame()
         simulator.step_frame()
-        self._appearance.vertex_colors(self.simulator.sheet)
+        colors = self._appearance.vertex_colors(self.simulator.sheet)
+        for camera in self._settings.cameras[:1]:  # the organised cloud's kernel too
+            tiny_camera = replace(camera.config, width=4, height=3)
+            camera_messages(Header(), tiny_camera,
+                            render_simulator(tiny_camera, self.simulator, colors))
 
     def _open_recorder(self, settings: NodeSettings):
         if not (settings.rerun_path or settings.rerun_connect):
