@@ -432,8 +432,10 @@ class Simulator:
             self._factor_global_steps()  # the updates since the last factor cost more
         elif self._bending_step is not None and (self._bending_step.step.stale
                                                  or self._bending.matrix_changed):
-            # patches gave way to hinges: the springs are as they were
-            self._factor_global_steps(springs=False)
+            # patches gave way to hinges: the springs are as they were, and the bending's
+            # change is known as terms unless its factor is due anew anyway
+            change = None if self._bending_step.step.stale else self._bending.yield_change
+            self._factor_global_steps(springs=False, changes=(None, change))
         if restoring and not (yielded or self._bending.matrix_changed or self.nan_seen
                               or (self.breaks, self.folds, len(self.damage.creases))
                               != changes_before):
