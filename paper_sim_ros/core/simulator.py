@@ -96,8 +96,9 @@ gives all of its pull (within the band it still pulled as hard as the band let i
 held a short edge 1.08 % short at rest, 65², seed 1)."""
 YIELD_BATCH_FRAMES = 6
 """Patches that yield are dropped together once this many frames have passed since the
-first of them (SheetBending.yield_to): each drop factorises the bending system again
-(dropped at once: `crumple` at 65² ran at 1.15× real time; docs/solver.md)."""
+first of them (SheetBending.yield_to): each drop changes the bending system (dropped at
+once, each change factorised anew: `crumple` at 65² ran at 1.15× real time;
+docs/solver.md)."""
 
 CONTACT_TOLERANCE = 1e-5
 """Depth inside a probe [m] at which a vertex without a contact row gets one."""
