@@ -4,6 +4,7 @@
         [--overhangs 0.06 0.1 0.15 0.2] [--spacings 0.0025 0.005 0.01]
     .venv/bin/python bench/membrane_bending.py squeeze [--grid 33] [--seed 0]
         [--substeps 1] [--no-damage] [--membrane 60]
+    .venv/bin/python bench/membrane_bending.py cost [--grid 65]
 
 The 'constrained' solver splits a sub-step in two: a bending solve that sees no membrane,
 then the springs' local/global iterations, which rebuild the sheet from the directions its
@@ -16,7 +17,10 @@ and grips hold their coordinates; the table holds z by an active set (vertices p
 stay held, those pulled down go, those below come in); a probe's contact row along a
 general normal is left out, so scenes where a probe touches without pressing into the table
 (poke) are not measured. ``--membrane 0`` runs the solver as it is, for comparison.
-Prints the elastica table of bench/bench_cantilever.py, or a scenario's metrics.
+Prints the elastica table of bench/bench_cantilever.py, or a scenario's metrics, or
+(``cost``) what the coupled system costs against today's bending system on the `hanging`
+sheet: factor entries and SciPy's factorisation and solve times, the unknowns of a vertex
+kept together in the scalar system's minimum-degree order.
 """
 from __future__ import annotations
 
@@ -32,7 +36,7 @@ import numpy as np  # noqa: E402
 import scipy.sparse as sparse  # noqa: E402
 import scipy.sparse.linalg as sparse_linalg  # noqa: E402
 
-from paper_sim_ros.core import load_scenario, run_scenario  # noqa: E402
+from paper_sim_ros.core import build_simulator, load_scenario, run_scenario  # noqa: E402
 from paper_sim_ros.core import simulator as simulator_module  # noqa: E402
 from paper_sim_ros.core.scenarios import builtin_mapping, with_overrides  # noqa: E402
 
@@ -131,6 +135,37 @@ def patch(weight: float) -> None:
     simulator_module.Simulator._bending_solve = membrane_bending_solve(weight)
 
 
+def cost(grid: int, weight: float) -> None:
+    """The coupled system's factor against the bending system's, on a hanging sheet."""
+    simulator = build_simulator(load_scenario('hanging', grid=grid, duration=0.1))
+    simulator.step_frame()
+    simulator._membrane_directions_from = simulator.sheet.positions.copy()
+    system = simulator._bending_step.step.system
+    free = ~simulator.sheet.pinned
+    scalar = system[free][:, free].tocsc()
+    order = sparse_linalg.splu(scalar, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+                               options={'SymmetricMode': True}).perm_c
+    by_position = np.argsort(order)  # the vertices in elimination order
+    rhs = np.zeros((system.shape[0], 3))
+    coupled, _ = coupled_system(simulator, rhs, weight)
+    unknowns = (3 * np.flatnonzero(free)[by_position][:, None] + np.arange(3)).reshape(-1)
+    for name, matrix, columns in (
+            ('bending (V, three right-hand sides)', scalar[by_position][:, by_position], 3),
+            ('coupled (3V, one right-hand side)', coupled[unknowns][:, unknowns], 1)):
+        started = time.perf_counter()
+        factor = sparse_linalg.splu(matrix.tocsc(), permc_spec='NATURAL',
+                                    diag_pivot_thresh=0.0, options={'SymmetricMode': True})
+        factorised = time.perf_counter() - started
+        right = np.random.default_rng(0).random((matrix.shape[0], columns))
+        best = np.inf
+        for _ in range(20):
+            started = time.perf_counter()
+            factor.solve(right)
+            best = min(best, time.perf_counter() - started)
+        print(f'{grid}² {name}: {factor.L.nnz} factor entries, factorised in '
+              f'{1e3 * factorised:.0f} ms, a solve {1e3 * best:.2f} ms (SciPy)')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('what', help="'cantilever', or a built-in scenario")
@@ -140,6 +175,9 @@ def main() -> None:
     parser.add_argument('--substeps', type=int, default=None)
     parser.add_argument('--no-damage', action='store_true')
     arguments, rest = parser.parse_known_args()
+    if arguments.what == 'cost':
+        cost(arguments.grid, arguments.membrane or 60.0)
+        return
     patch(arguments.membrane)
     if arguments.what == 'cantilever':
         sys.argv = ['bench_cantilever.py'] + rest
