@@ -5,6 +5,7 @@
     .venv/bin/python bench/membrane_bending.py squeeze [--grid 33] [--seed 0]
         [--substeps 1] [--no-damage] [--membrane 60]
     .venv/bin/python bench/membrane_bending.py cost [--grid 65]
+    .venv/bin/python bench/membrane_bending.py cantilever --membrane 6 --cg 10
 
 The 'constrained' solver splits a sub-step in two: a bending solve that sees no membrane,
 then the springs' local/global iterations, which rebuild the sheet from the directions its
@@ -17,6 +18,8 @@ and grips hold their coordinates; the table holds z by an active set (vertices p
 stay held, those pulled down go, those below come in); a probe's contact row along a
 general normal is left out, so scenes where a probe touches without pressing into the table
 (poke) are not measured. ``--membrane 0`` runs the solver as it is, for comparison.
+``--cg K`` solves the coupled system (without the table) by K conjugate-gradient
+iterations preconditioned by the bending system alone, per coordinate, instead.
 Prints the elastica table of bench/bench_cantilever.py, or a scenario's metrics, or
 (``cost``) what the coupled system costs against today's bending system on the `hanging`
 sheet: factor entries and SciPy's factorisation and solve times, the unknowns of a vertex
@@ -81,11 +84,50 @@ def solve_held(matrix, right: np.ndarray, held: np.ndarray, values: np.ndarray) 
     return solution
 
 
-def membrane_bending_solve(weight: float):
-    """A replacement for ``Simulator._bending_solve`` with the membrane of ``weight`` [N/m]."""
+def conjugate_gradients(simulator, matrix, right: np.ndarray, positions: np.ndarray,
+                        iterations: int) -> None:
+    """``iterations`` of conjugate gradients on the coupled system from ``positions``,
+    preconditioned per coordinate by the bending system M/h² + Q alone (factored once per
+    factor of the simulator's; pins held, no table)."""
+    step = simulator._bending_step.step
+    free = ~simulator.sheet.pinned
+    if getattr(simulator, '_membrane_preconditioned', None) is not step:
+        simulator._membrane_preconditioner = sparse_linalg.splu(
+            step.system[free][:, free].tocsc())
+        simulator._membrane_preconditioned = step
+    preconditioner = simulator._membrane_preconditioner
+
+    def precondition(residual):
+        out = np.zeros_like(residual)
+        out[free] = preconditioner.solve(residual[free])
+        return out
+    solution = positions.copy()
+    residual = (right - matrix @ solution.reshape(-1)).reshape(-1, 3)
+    residual[~free] = 0.0
+    direction = precondition(residual)
+    along = float(np.sum(residual * direction))
+    for _ in range(iterations):
+        product = (matrix @ direction.reshape(-1)).reshape(-1, 3)
+        product[~free] = 0.0
+        step_length = along / float(np.sum(direction * product))
+        solution += step_length * direction
+        residual -= step_length * product
+        preconditioned = precondition(residual)
+        next_along = float(np.sum(residual * preconditioned))
+        direction = preconditioned + (next_along / along) * direction
+        along = next_along
+    positions[:] = solution
+
+
+def membrane_bending_solve(weight: float, iterations: int = 0):
+    """A replacement for ``Simulator._bending_solve`` with the membrane of ``weight`` [N/m],
+    solved directly, or (``iterations``, without the table) by conjugate gradients."""
     def bending_solve(self, rhs, positions, mass_over_h2) -> None:
         vertex_count = positions.shape[0]
         matrix, right = coupled_system(self, rhs, weight)
+        if iterations and not self.config.contact.ground_enabled:
+            conjugate_gradients(self, matrix, right, positions, iterations)
+            return
         values = positions.reshape(-1).copy()
         held = np.zeros(3 * vertex_count, dtype=bool)
         pinned = self.sheet.pinned | self._grip_pinned
@@ -122,7 +164,7 @@ def membrane_bending_solve(weight: float):
     return bending_solve
 
 
-def patch(weight: float) -> None:
+def patch(weight: float, iterations: int = 0) -> None:
     """Patch the simulator's bending solve (and note each sub-step's starting positions)."""
     if weight <= 0.0:
         return
@@ -132,7 +174,7 @@ def patch(weight: float) -> None:
         self._membrane_directions_from = self.sheet.positions.copy()
         return substep(self, h, probe_from, probe_to)
     simulator_module.Simulator._substep = noting_substep
-    simulator_module.Simulator._bending_solve = membrane_bending_solve(weight)
+    simulator_module.Simulator._bending_solve = membrane_bending_solve(weight, iterations)
 
 
 def cost(grid: int, weight: float) -> None:
@@ -174,11 +216,14 @@ def main() -> None:
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--substeps', type=int, default=None)
     parser.add_argument('--no-damage', action='store_true')
+    parser.add_argument('--cg', type=int, default=0,
+                        help='conjugate-gradient iterations a solve instead of the direct '
+                             'solve (no table: cantilever, hanging)')
     arguments, rest = parser.parse_known_args()
     if arguments.what == 'cost':
         cost(arguments.grid, arguments.membrane or 60.0)
         return
-    patch(arguments.membrane)
+    patch(arguments.membrane, arguments.cg)
     if arguments.what == 'cantilever':
         sys.argv = ['bench_cantilever.py'] + rest
         runpy.run_path(os.path.join(os.path.dirname(__file__), 'bench_cantilever.py'),
