@@ -215,6 +215,7 @@ def main() -> None:
     parser.add_argument('--grid', type=int, default=33)
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--substeps', type=int, default=None)
+    parser.add_argument('--duration', type=float, default=None, help='[s] (the scenario\'s)')
     parser.add_argument('--no-damage', action='store_true')
     parser.add_argument('--cg', type=int, default=0,
                         help='conjugate-gradient iterations a solve instead of the direct '
@@ -230,7 +231,7 @@ def main() -> None:
                        run_name='__main__')
         return
     mapping = with_overrides(builtin_mapping(arguments.what), grid=arguments.grid,
-                             seed=arguments.seed)
+                             seed=arguments.seed, duration=arguments.duration)
     if arguments.substeps:
         mapping['solver'] = {**(mapping.get('solver') or {}), 'substeps': arguments.substeps}
     if arguments.no_damage:
