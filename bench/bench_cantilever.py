@@ -3,6 +3,7 @@ under its own weight; its tip angle against the elastica of a self-weighted cant
 
     .venv/bin/python bench/bench_cantilever.py [--overhangs 0.06 0.1 0.15 0.2]
         [--spacings 0.0025 0.005 0.01] [--width 0.02] [--length-projection]
+        [--membrane 8 [--membrane-iterations 10]]
 
 The strip (default office paper: B = 4e-4 N·m, 80 g/m²) is clamped by its first two rows of
 vertices (one pinned row is a hinge, not a clamp), released flat and left to settle with air
@@ -41,7 +42,7 @@ def elastica_tip_angle(load: float) -> float:
 
 
 def drooped_tip_angle(overhang: float, spacing: float, width: float,
-                      length_projection: bool = False) -> tuple[float, dict]:
+                      solver: dict | None = None) -> tuple[float, dict]:
     """The simulated strip's tip angle [rad], its sheet settings, its fastest vertex at the
     end [m/s] and the seconds the stepping took."""
     rows = int(round(overhang / spacing)) + 2  # the clamp's two rows, then the overhang
@@ -50,7 +51,7 @@ def drooped_tip_angle(overhang: float, spacing: float, width: float,
         'name': 'cantilever', 'duration': 4.0, 'pin': 'none',
         'sheet': {'width': width, 'height': (rows - 1) * spacing, 'nx': columns, 'ny': rows,
                   'elevation': 0.5},
-        'solver': {'air_damping': 6.0, 'length_projection': length_projection},
+        'solver': {'air_damping': 6.0, **(solver or {})},
         'contact': {'ground_enabled': False},
         'damage': {'enabled': False}})
     simulator = build_simulator(scenario)
@@ -76,15 +77,21 @@ def main() -> None:
     parser.add_argument('--width', type=float, default=0.02)
     parser.add_argument('--length-projection', action='store_true',
                         help='solver.length_projection on (core/length_projection.py)')
+    parser.add_argument('--membrane', type=float, default=0.0,
+                        help='solver.membrane_weight (core/membrane.py)')
+    parser.add_argument('--membrane-iterations', type=int, default=None,
+                        help='solver.membrane_iterations')
     args = parser.parse_args()
-    drooped_tip_angle(0.02, 0.01, args.width, args.length_projection)  # numba compiled
+    solver = {'length_projection': args.length_projection, 'membrane_weight': args.membrane}
+    if args.membrane_iterations is not None:
+        solver['membrane_iterations'] = args.membrane_iterations
+    drooped_tip_angle(0.02, 0.01, args.width, solver)  # numba compiled
     print('| overhang | spacing | elastica tip angle | simulated | ratio | max speed at 4 s '
           '| s to step 4 s |')
     print('|---|---|---|---|---|---|---|')
     for overhang in args.overhangs:
         for spacing in args.spacings:
-            angle, sheet = drooped_tip_angle(overhang, spacing, args.width,
-                                             args.length_projection)
+            angle, sheet = drooped_tip_angle(overhang, spacing, args.width, solver)
             # the strip is flat between its two pinned rows: its slope is zero at their
             # midpoint, where the discrete cantilever starts
             span = overhang + 0.5 * spacing

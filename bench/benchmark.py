@@ -26,6 +26,7 @@ from paper_sim_ros.warmup import warm_up  # noqa: E402
 SOLVER_OPTIONS = {
     'constrained (default)': {},
     'constrained, len. proj.': {'length_projection': True},
+    'constrained, membrane 30': {'membrane_weight': 30.0},
     'paper Eq.6, 10 Jacobi': {'method': 'paper', 'jacobi_iterations': 10},
     'paper Eq.6, 100 Jacobi': {'method': 'paper', 'jacobi_iterations': 100},
 }

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/contact_sweep.py [--scenarios press drag ...] [--grids 33 65]
         [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4] [--energy-restoring]
-        [--length-projection]
+        [--length-projection] [--membrane 30]
 
 Per run: max HINGE strain over the run, deepest vertex inside a probe and below the table
 (beyond a pressed probe's dimple), breaks, folds, relaxed deviation, mesh validity, mass
@@ -31,13 +31,13 @@ from paper_sim_ros.core.scenarios import (BUILTIN_SCENARIOS, builtin_mapping,  #
 
 
 def measure(name: str, grid: int, seed: int, damage: bool, substeps: int | None,
-            solver_options: tuple[str, ...] = ()) -> dict:
-    """One run; ``solver_options``: the solver's switches turned on (e.g.
-    'energy_restoring')."""
+            solver_options: dict | None = None) -> dict:
+    """One run; ``solver_options``: solver settings overridden (e.g.
+    {'energy_restoring': True})."""
     mapping = with_overrides(builtin_mapping(name), grid=grid, seed=seed,
                              damage_enabled=damage, substeps=substeps)
     mapping['solver'] = {**(mapping.get('solver') or {}),
-                         **{option: True for option in solver_options}}
+                         **(solver_options or {})}
     scenario = load_scenario(mapping)
     simulator = build_simulator(scenario)
     mass = simulator.sheet.vertex_mass
@@ -86,10 +86,14 @@ def main(argv: list[str] | None = None) -> int:
                         help='solver.energy_restoring on (docs/solver.md)')
     parser.add_argument('--length-projection', action='store_true',
                         help='solver.length_projection on (docs/solver.md)')
+    parser.add_argument('--membrane', type=float, default=0.0,
+                        help='solver.membrane_weight (core/membrane.py; 0: none)')
     args = parser.parse_args(argv)
-    switches = tuple(option for option in ('energy_restoring', 'length_projection')
-                     if getattr(args, option))
-    runs = [(name, grid, seed, not args.no_damage, args.substeps, switches)
+    options = {option: True for option in ('energy_restoring', 'length_projection')
+               if getattr(args, option)}
+    if args.membrane:
+        options['membrane_weight'] = args.membrane
+    runs = [(name, grid, seed, not args.no_damage, args.substeps, options)
             for name in args.scenarios for grid in args.grids for seed in args.seeds]
     results = []
     with ProcessPoolExecutor(args.jobs) as pool:

@@ -175,6 +175,14 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "Project the held springs onto the strain band between the bending solve "
                   "and the springs' iterations ('constrained'; bending right at large "
                   'deflections, several times slower).'),
+    ParameterSpec('solver.membrane_weight', _SOLVER.membrane_weight,
+                  "The held springs as a membrane in the bending solve, each of weight this "
+                  "x B / rest length^2 ('constrained'; 0: none; 30: a drooping strip at the "
+                  'elastica, a squeezed sheet kept from crushing, 1.5-3 times slower).',
+                  (0.0, 1.0e6)),
+    ParameterSpec('solver.membrane_iterations', _SOLVER.membrane_iterations,
+                  "Conjugate-gradient iterations of the membrane's solve per sub-step, at "
+                  'most (each a bending solve).', (0, 1000)),
     ParameterSpec('contact.ground_enabled', True, 'A table (ground plane) under the sheet.'),
     ParameterSpec('contact.ground_height', 0.0, 'Height of the table [m].', (-100.0, 100.0)),
     ParameterSpec('contact.ground_friction', _CONTACT.ground_friction,

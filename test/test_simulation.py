@@ -497,6 +497,9 @@ def test_absurd_sheet_parameters_are_refused(field, value):
                                           ('buckling_compression', 0.0),
                                           ('buckling_compression', float('nan')),
                                           ('energy_restoring', 1), ('length_projection', 'yes'),
+                                          ('membrane_weight', -1.0),
+                                          ('membrane_weight', float('nan')),
+                                          ('membrane_iterations', 2.5),
                                           ('air_density', -1.0),
                                           ('drag_coefficient', float('inf'))])
 def test_absurd_solver_parameters_are_refused(field, value):

@@ -129,6 +129,13 @@ class SolverConfig:
     the elastica's tip angle at large deflections too (within 2 % up to 72°, where it is
     8–14 % short without), at a cost (docs/solver.md). Off by default: it makes a hanging
     sheet several times slower, and its swing strains more (1.1 % against 0.35 %, 65²)."""
+    membrane_weight: float = 0.0
+    """('constrained') The held springs' membrane in the bending solve, its weight per
+    spring this × B / l0² (core/membrane.py; 0: none): the bending solve then keeps the
+    edges' lengths while it turns them, which the springs' iterations alone cannot."""
+    membrane_iterations: int = 10
+    """Conjugate-gradient iterations of the membrane's solve per sub-step, at most (each
+    a bending solve)."""
     energy_restoring: bool = False
     """('constrained') After a frame in which nothing but gravity, air and the pins acted
     and nothing yielded or broke, give back the energy the step lost beyond air drag by
@@ -143,7 +150,8 @@ class SolverConfig:
         _require(self.dt <= 0.1, f'dt must be <= 0.1 s, got {self.dt}')
         for name, upper in (('substeps', 10000), ('jacobi_iterations', 100000),
                             ('projective_iterations', 1000), ('projective_max_iterations', 1000),
-                            ('constraint_iterations', 10000)):
+                            ('constraint_iterations', 10000),
+                            ('membrane_iterations', 1000)):
             value = getattr(self, name)
             _require(isinstance(value, int) and 0 <= value <= upper,
                      f'{name} must be an integer in [0, {upper}], got {value!r}')
@@ -158,6 +166,7 @@ class SolverConfig:
         _require(math.isfinite(self.buckling_compression) and 0 < self.buckling_compression < 1,
                  f'buckling_compression must be in (0, 1), got {self.buckling_compression!r}')
         _finite_positive('global_stiffness', self.global_stiffness)
+        _finite_non_negative('membrane_weight', self.membrane_weight)
         _require(len(self.gravity) == 3 and all(math.isfinite(g) for g in self.gravity),
                  f'gravity must be three finite numbers, got {self.gravity!r}')
         _require(isinstance(self.energy_restoring, bool),

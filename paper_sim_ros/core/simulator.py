@@ -32,6 +32,7 @@ from .damage import DamageModel
 from .probes import Probes
 from .kernels import EPSILON_LENGTH
 from .length_projection import project_lengths
+from .membrane import Membrane, membrane_weights
 from .mesh_editing import spring_lengths
 from .projective import (ConstrainedSolve, GlobalStep, UpdatedStep, global_step,
                          inertial_step, local_targets, spring_entries, term_entries)
@@ -292,6 +293,9 @@ class Simulator:
             sheet.spring_rest_length[hinge], sheet.vertex_count)
         self._held_rest = sheet.spring_rest_length[held_springs]
         self._global_weight = np.full(held_springs.size, self.config.solver.global_stiffness)
+        self._membrane_weight = membrane_weights(self._held_rest,
+                                                 self.config.sheet.bending_rigidity,
+                                                 self.config.solver.membrane_weight)
         previous_bending = self._bending
         self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
                                      self.config.sheet.bending_rigidity,
@@ -575,6 +579,9 @@ class Simulator:
         sheet = self.sheet
         self._constraint_rest = sheet.spring_rest_length[self._constraint_springs]
         self._held_rest = sheet.spring_rest_length[self._held_springs]
+        self._membrane_weight = membrane_weights(self._held_rest,
+                                                 self.config.sheet.bending_rigidity,
+                                                 self.config.solver.membrane_weight)
 
     def _substep(self, h: float, probe_from: np.ndarray, probe_to: np.ndarray) -> None:
         """One sub-step of ``h`` [s], the probes moving from ``probe_from`` to ``probe_to``."""
@@ -772,6 +779,8 @@ class Simulator:
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         self._bending.add_targets(positions, weighted_inertia)
         self._bending_solve(weighted_inertia, positions, inertia_weight[:, 0])
+        if solver.membrane_weight > 0.0 and self._held_ends.size:
+            self._membrane_solve(weighted_inertia, positions, start_positions)
         if solver.length_projection and self._constraint_springs.size:
             # the edges turn towards their lengths before the iterations rebuild the sheet
             # from their directions (docs/solver.md, "The cantilever")
@@ -816,10 +825,27 @@ class Simulator:
         stiffness: exactly, by holding the vertices on the table (``_table_rows``), where
         they are few; by Uzawa iterations (``_table_uzawa``) where the sheet lies flat on
         the table."""
+        self._solved_rows = self._rows
         if not self.config.contact.ground_enabled:
             self._bending_step.solve(rhs, positions, *self._rows)
         elif not self._table_rows(rhs, positions):
             self._table_uzawa(rhs, positions, mass_over_h2)
+
+    def _membrane_solve(self, rhs, positions, start_positions) -> None:
+        """The bending solve again with the held springs as a membrane (core/membrane.py),
+        by conjugate gradients from the bending solve's answer, under the rows it ended
+        with (probes, grips, the table's active set; the Uzawa reaction stays in ``rhs``)."""
+        solver = self.config.solver
+        vertex, direction, value = self._solved_rows
+        free_rows = np.zeros_like(value)
+        bending_step = self._bending_step
+
+        def precondition(residual, out):
+            bending_step.solve(residual, out, vertex, direction, free_rows)
+        membrane = Membrane(self._held_ends, self._held_rest, self._membrane_weight,
+                            start_positions)
+        membrane.solve(bending_step.step.system, precondition, rhs, positions,
+                       bending_step.step.pinned_mask, solver.membrane_iterations)
 
     def _table_rows(self, rhs, positions) -> bool:
         """The table's contacts as constraint rows of the bending solve (z = table height),
@@ -847,10 +873,11 @@ class Simulator:
                 > 3 * (TABLE_ITERATIONS - 1) * standing:
             return False
         for iteration in range(TABLE_ITERATIONS):
-            multipliers = self._bending_step.solve(
-                rhs, positions, np.concatenate([vertex, held]),
-                np.concatenate([direction, np.tile(TABLE_NORMAL, (held.size, 1))]),
-                np.concatenate([value, np.full(held.size, ground)]), same_rhs=iteration > 0)
+            self._solved_rows = (np.concatenate([vertex, held]),
+                                 np.concatenate([direction, np.tile(TABLE_NORMAL, (held.size, 1))]),
+                                 np.concatenate([value, np.full(held.size, ground)]))
+            multipliers = self._bending_step.solve(rhs, positions, *self._solved_rows,
+                                                   same_rhs=iteration > 0)
             push = -multipliers[vertex.size:]  # a row pushes along its direction where λ < 0
             solved = held
             below = eligible & (positions[:, 2] < ground - TABLE_TOLERANCE)
