@@ -1,7 +1,7 @@
 """Random scenes no test names: how the core holds up outside the built-in scenarios.
 
     .venv/bin/python bench/random_scenes.py [--family table pinned poke wild] [--count 40]
-        [--start 0] [--jobs 2] [--time-limit 200]
+        [--start 0] [--jobs 2] [--time-limit 200] [--membrane 30]
 
 Each run is drawn from its index alone (reproducible): a sheet of random size (0.1-0.3 m)
 and grid (17-65 a side, cells near square), a random material, sub-step count, seed and
@@ -14,7 +14,7 @@ damage on or off, and one of four families:
   across it and withdraws (a table below or not);
 - ``wild``: anything the scenario format accepts: probes appearing anywhere, inside the
   sheet or the table, at any speed, 3-47 vertices a side, crumples, aged surfaces, odd
-  gravity, other frame steps, the solver's switches. Its strains mean little; it is
+  gravity, other frame steps, the solver's switches and membrane. Its strains mean little; it is
   there to find exceptions, non-finite states, invalid meshes and runs that stall.
 
 Per run: max HINGE strain, breaks, folds, deepest vertex in a probe (pinned vertices
@@ -134,6 +134,8 @@ def _wild(rng: np.random.Generator) -> dict:
             for t in times]})
     if rng.random() < 0.3:
         mapping['contact']['probe_friction'] = float(rng.uniform(0.0, 1.5))
+    if rng.random() < 0.2:  # drawn last: the earlier draws of an index stay as they were
+        mapping['solver']['membrane_weight'] = float(rng.choice([0.5, 30.0, 3000.0]))
     return mapping
 
 
@@ -155,9 +157,12 @@ def _alarm(signum, frame):
     raise _TooSlow()
 
 
-def measure(family: str, index: int, time_limit: int) -> dict:
-    """One run: its figures, or what went wrong."""
+def measure(family: str, index: int, time_limit: int, membrane: float = 0.0) -> dict:
+    """One run (``membrane``: solver.membrane_weight, where not 0): its figures, or what
+    went wrong."""
     mapping = scene(family, index)
+    if membrane:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': membrane}
     record = {'family': family, 'index': index, 'problems': []}
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(time_limit)
@@ -196,8 +201,10 @@ def main() -> None:
     parser.add_argument('--start', type=int, default=0, help='first run index')
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--time-limit', type=int, default=200, help='seconds a run may take')
+    parser.add_argument('--membrane', type=float, default=0.0,
+                        help='solver.membrane_weight in every run (core/membrane.py)')
     args = parser.parse_args()
-    runs = [(family, index, args.time_limit) for family in args.family
+    runs = [(family, index, args.time_limit, args.membrane) for family in args.family
             for index in range(args.start, args.start + args.count)]
     records = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:

@@ -2,7 +2,7 @@
 relative to the nearest probe.
 
     .venv/bin/python bench/strain_where.py squeeze [--grid 65] [--seed 0] [--substeps 4]
-        [--every 6]
+        [--every 6] [--membrane 30]
 
 Each line: simulated time, the worst spring's strain (signed), how many springs are beyond
 2 %, the nearest active probe, the spring's midpoint relative to that probe's centre (x, y)
@@ -19,6 +19,7 @@ os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 import numpy as np  # noqa: E402
 
 from paper_sim_ros.core import build_simulator, load_scenario  # noqa: E402
+from paper_sim_ros.core.scenarios import builtin_mapping, with_overrides  # noqa: E402
 from paper_sim_ros.core.sheet import HINGE  # noqa: E402
 
 
@@ -30,9 +31,14 @@ def main() -> None:
     parser.add_argument('--substeps', type=int, default=None,
                         help="sub-steps per frame (default: the scenario's own)")
     parser.add_argument('--every', type=int, default=6, help='frames between lines')
+    parser.add_argument('--membrane', type=float, default=0.0,
+                        help='solver.membrane_weight (core/membrane.py; 0: none)')
     arguments = parser.parse_args()
-    scenario = load_scenario(arguments.scenario, grid=arguments.grid, seed=arguments.seed,
-                             substeps=arguments.substeps)
+    mapping = with_overrides(builtin_mapping(arguments.scenario), grid=arguments.grid,
+                             seed=arguments.seed, substeps=arguments.substeps)
+    mapping['solver'] = {**(mapping.get('solver') or {}),
+                         'membrane_weight': arguments.membrane}
+    scenario = load_scenario(mapping)
     simulator = build_simulator(scenario)
     dt = scenario.config.solver.dt
     for frame in range(scenario.frame_count):
