@@ -1,6 +1,6 @@
 """The demo's physics without ROS: what `make demo` steps each frame, timed alone.
 
-    .venv/bin/python bench/bench_demo.py [--grids 33 65] [--duration 20]
+    .venv/bin/python bench/bench_demo.py [--grids 33 65] [--duration 20] [--membrane 30]
 
 The scene of paper_sim_ros.demo: an A4 sheet clamped along its short edge, the table
 0.2 m below (its far end drapes onto it), the scripted probe's path (ScriptedProbe's
@@ -27,17 +27,19 @@ PROBE_RADIUS = 0.02
 """The demo's probe radius [m] (config/paper_sim.yaml, probe_radii)."""
 
 
-def demo_scene(grid: int, duration: float):
-    """The demo's scenario: the node's defaults with the demo's overrides (demo.py)."""
+def demo_scene(grid: int, duration: float, membrane: float = 0.0):
+    """The demo's scenario: the node's defaults with the demo's overrides (demo.py);
+    ``membrane``: solver.membrane_weight."""
     return load_scenario({
         'name': 'demo', 'duration': duration, 'pin': 'short_edge',
         'sheet': {'nx': grid, 'ny': grid, 'elevation': 0.0},
+        'solver': {'membrane_weight': membrane},
         'contact': {'ground_enabled': True, 'ground_height': -0.2}})
 
 
-def run(grid: int, duration: float) -> dict:
+def run(grid: int, duration: float, membrane: float = 0.0) -> dict:
     """Step the demo's scene; frame times [s] and strains per frame."""
-    scenario = demo_scene(grid, duration)
+    scenario = demo_scene(grid, duration, membrane)
     simulator = build_simulator(scenario)
     path = ProbePath()
     dt = scenario.config.solver.dt
@@ -59,12 +61,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--grids', type=int, nargs='+', default=[33, 65])
     parser.add_argument('--duration', type=float, default=20.0)
+    parser.add_argument('--membrane', type=float, default=0.0,
+                        help='solver.membrane_weight (core/membrane.py; 0: none)')
     args = parser.parse_args()
-    run(17, 1.0)  # numba compilation
+    run(17, 1.0, args.membrane)  # numba compilation
     print('| grid | real-time factor | ms a frame (p95) | max strain, run | last second |')
     print('|---|---|---|---|---|')
     for grid in args.grids:
-        result = run(grid, args.duration)
+        result = run(grid, args.duration, args.membrane)
         seconds, strain = result['frame_seconds'], result['strain']
         last_second = int(round(1.0 / result['dt']))
         print(f'| {grid}² | {seconds.size * result["dt"] / seconds.sum():.2f} '
