@@ -291,11 +291,8 @@ class Simulator:
         self._memory_longest = two_edge_path_lengths(
             sheet.spring_vertices[self._memory_springs], sheet.spring_vertices[hinge],
             sheet.spring_rest_length[hinge], sheet.vertex_count)
-        self._held_rest = sheet.spring_rest_length[held_springs]
+        self._rest_lengths_changed()  # the held springs' rest lengths and membrane weights
         self._global_weight = np.full(held_springs.size, self.config.solver.global_stiffness)
-        self._membrane_weight = membrane_weights(self._held_rest,
-                                                 self.config.sheet.bending_rigidity,
-                                                 self.config.solver.membrane_weight)
         previous_bending = self._bending
         self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
                                      self.config.sheet.bending_rigidity,
@@ -702,20 +699,18 @@ class Simulator:
                                           sheet.vertex_mass) - momentum
         if not np.all(np.isfinite(excess)):
             return
-        contact = self.config.contact
-        if not contact.ground_enabled or vertical_only:
-            kernels.remove_angular_momentum(sheet.positions, sheet.velocities,
-                                            sheet.vertex_mass, excess, h, vertical_only)
-            return
         # a sheet landing in this sub-step: a turn that takes it into the table is the
         # table's torque, not the sheet's own (aged with the membrane, 33², seed 0: a turn
-        # about a horizontal axis put a corner 0.49 mm below it)
-        positions, velocities = sheet.positions.copy(), sheet.velocities.copy()
+        # about a horizontal axis put a corner 0.49 mm below it); a turn about the vertical
+        # keeps the heights
+        contact = self.config.contact
+        landing = contact.ground_enabled and not vertical_only
+        if landing:
+            before = sheet.positions.copy(), sheet.velocities.copy()
         kernels.remove_angular_momentum(sheet.positions, sheet.velocities, sheet.vertex_mass,
                                         excess, h, vertical_only)
-        if sheet.positions[:, 2].min() < contact.ground_height - TABLE_TOLERANCE:
-            sheet.positions[:] = positions
-            sheet.velocities[:] = velocities
+        if landing and sheet.positions[:, 2].min() < contact.ground_height - TABLE_TOLERANCE:
+            sheet.positions[:], sheet.velocities[:] = before
 
     def _force_step(self, h: float) -> None:
         """Every spring a force: the paper's Eq. 6 Jacobi iteration, or symplectic Euler."""
