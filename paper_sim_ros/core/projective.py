@@ -673,6 +673,9 @@ class ConstrainedSolve:
         """The rows (vertex, direction arrays) whose S is factored in ``_lower``: the same
         rows come back for every iteration of a sub-step."""
         self._lower = np.zeros((0, 0))
+        self._covered_rows: tuple = ()
+        """(row vertices, their column indices) of the last solve: the same array comes
+        back for every solve of a sub-step (only a reset of the columns forgets it)."""
         self._unconstrained: np.ndarray | None = None
         """x₀ = A⁻¹ b of the last solve (all vertices), for a solve again under other rows."""
 
@@ -681,9 +684,18 @@ class ConstrainedSolve:
         third of a solve each the first time."""
         return int(np.count_nonzero(self._column_of[vertices] < 0))
 
+    def _row_columns(self, vertices: np.ndarray) -> np.ndarray:
+        """The column indices of the row ``vertices``, their columns made where missing."""
+        covered = self._covered_rows
+        if covered and covered[0] is vertices:  # the rule in a sub-step's iterations
+            return covered[1]
+        self._ensure_columns(vertices)
+        self._covered_rows = (vertices, self._column_of[vertices])
+        return self._covered_rows[1]
+
     def _ensure_columns(self, vertices: np.ndarray) -> None:
         absent = self._column_of[vertices] < 0
-        if not absent.any():  # the rule in a sub-step's iterations
+        if not absent.any():
             return
         missing = np.unique(vertices[absent])
         vertex_count = self._column_of.size
@@ -721,8 +733,7 @@ class ConstrainedSolve:
             np.copyto(self._unconstrained, positions)
         if row_vertex.size == 0:
             return np.zeros(0)
-        self._ensure_columns(row_vertex)
-        row_column = self._column_of[row_vertex]
+        row_column = self._row_columns(row_vertex)
         rows = self._factored_rows
         if not (rows and rows[0] is row_vertex and rows[1] is row_direction):
             self._lower = np.empty((row_vertex.size, row_vertex.size))

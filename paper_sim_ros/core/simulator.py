@@ -68,8 +68,6 @@ SMALL_PROBE_EDGES = 0.6
 """A probe whose radius is below this many of the mesh's longest edges can pass between a
 triangle's corners (a right triangle's circumradius is half its longest edge): the
 triangles, not only the vertices, are kept out of it (kernels.project_probes_on_triangles)."""
-GRIP_ROW, CONTACT_ROW = 0, 1
-"""Kinds of the solves' constraint rows (Simulator._set_contact_rows)."""
 GRIP_ROWS_MOST = 192
 """Rows (three a vertex) that hold gripped vertices in the solves, at most: beyond, the
 gripped vertices are pins of the factored systems (Simulator._factor_grips). The rows' dense
@@ -155,6 +153,10 @@ class Simulator:
         self._rising_probes = np.zeros(0, dtype=bool)
         """The probes that rise off the sheet in the current sub-step (no rows but for what
         a solve carries deep into them: DEEP_IN_RISING_PROBE)."""
+        self._rising_indices = np.zeros(0, dtype=np.int64)
+        self._gripped = np.zeros(0, dtype=bool)
+        """The vertices gripped in the current sub-step's solves (as ``_rising_indices``,
+        fixed for its solves: ``_settle_contact_rows`` reads them after every solve)."""
         self._start_positions = np.zeros((0, 3))
         """Where the sheet was at the start of the current sub-step."""
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
@@ -954,13 +956,12 @@ class Simulator:
         if kernels.contact_rows_hold(
                 positions, self._probe_to, self.probes.radius, self._free_probes,
                 contact.ground_height, contact.ground_enabled, CONTACT_TOLERANCE,
-                self.sheet.pinned, vertex, self._row_kind == CONTACT_ROW, multipliers,
-                np.flatnonzero(self._rising_probes), DEEP_IN_RISING_PROBE,
-                self._grip_probe >= 0):
+                self.sheet.pinned, vertex, self._contact_row, multipliers,
+                self._rising_indices, DEEP_IN_RISING_PROBE, self._gripped):
             return False
         deep_in = self._deep_in_rising_probes(positions)
         deep_in[vertex] = -1
-        keep = (self._row_kind != CONTACT_ROW) | (multipliers <= 0.0)
+        keep = ~self._contact_row | (multipliers <= 0.0)
         inside = self._inside_probes(positions)
         inside[vertex] = False
         deep_in[inside] = -1
@@ -973,22 +974,23 @@ class Simulator:
         self._rows = (np.concatenate([vertex[keep], added]),
                       np.concatenate([direction[keep], normal]),
                       np.concatenate([value[keep], np.einsum('va,va->v', normal, surface)]))
-        self._row_kind = np.concatenate([self._row_kind[keep],
-                                         np.full(added.size, CONTACT_ROW)])
+        self._contact_row = np.concatenate([self._contact_row[keep],
+                                            np.ones(added.size, dtype=bool)])
         self._table_reaction[added] = 0.0
         return True
 
     def _set_contact_rows(self, positions, probe_from, probe_to, start_positions) -> None:
         """What the probes hold in this sub-step's solves, as ConstrainedSolve rows
-        (``_rows``: vertex, direction, value; ``_row_kind``: GRIP_ROW, CONTACT_ROW): each
-        gripped vertex where its probe carries it (three rows), and each vertex a probe
-        reaches from where inertia takes it on that probe's surface along its normal (one
-        row, so the sheet slides over the probe instead of being dragged through itself)."""
+        (``_rows``: vertex, direction, value; ``_contact_row``: a contact's row, not a
+        grip's): each gripped vertex where its probe carries it (three rows), and each
+        vertex a probe reaches from where inertia takes it on that probe's surface along its
+        normal (one row, so the sheet slides over the probe instead of being dragged through
+        itself)."""
         sheet = self.sheet
         self._probe_from, self._probe_to = probe_from, probe_to
         self._factor_grips()
         if not self.probes.count:  # nothing to hold (nor gripped: grips need a probe)
-            self._rows, self._row_kind = NO_ROWS, NO_ROWS[0]
+            self._rows, self._contact_row = NO_ROWS, np.zeros(0, dtype=bool)
             return
         # the probes that hold what they reach in this sub-step's solves (_inside_probes):
         # a probe pressed into the table pinches what it reaches there (_grip), and the
@@ -1000,6 +1002,8 @@ class Simulator:
         rising = probe_to[:, 2] > probe_from[:, 2]
         self._free_probes = lifted & ~rising
         self._rising_probes = lifted & rising
+        self._rising_indices = np.flatnonzero(self._rising_probes)
+        self._gripped = self._grip_probe >= 0
         self._start_positions = start_positions
         gripped = np.flatnonzero((self._grip_probe >= 0) & ~self._grip_pinned)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
@@ -1013,8 +1017,8 @@ class Simulator:
         direction = np.concatenate([np.tile(np.eye(3), (gripped.size, 1)), normal])
         value = np.concatenate([positions[gripped].reshape(-1),
                                 np.einsum('va,va->v', normal, positions[contact])])
-        self._row_kind = np.concatenate([np.full(3 * gripped.size, GRIP_ROW),
-                                         np.full(contact.size, CONTACT_ROW)])
+        self._contact_row = np.concatenate([np.zeros(3 * gripped.size, dtype=bool),
+                                            np.ones(contact.size, dtype=bool)])
         # what the probes hold is not the table's to support (nor, once let go, to launch)
         self._table_reaction[vertex] = 0.0
         self._rows = (vertex, direction, value)
@@ -1040,7 +1044,7 @@ class Simulator:
         a few millimetres of its centre, and pushed out from there after the solve it was
         torn across the fingertip (65², seed 0: 343 %)."""
         deep_in = np.full(positions.shape[0], -1)
-        rising = np.flatnonzero(self._rising_probes)
+        rising = self._rising_indices
         if rising.size:
             kernels.deep_in_probes(positions, self._probe_to, self.probes.radius, rising,
                                    DEEP_IN_RISING_PROBE,
