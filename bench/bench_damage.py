@@ -4,7 +4,7 @@ Fig. 12–13 in numbers.
     .venv/bin/python bench/bench_damage.py cost --grid 33 65
     .venv/bin/python bench/bench_damage.py fragility --grid 33 --phi 0.5 1 2 4 8
     .venv/bin/python bench/bench_damage.py psi --grid 33 --psi 0 0.25 0.5 1 1.5
-    .venv/bin/python bench/bench_damage.py substeps --grid 33 65
+    .venv/bin/python bench/bench_damage.py substeps --grid 33 65 [--seed 0]
     .venv/bin/python bench/bench_damage.py drift --grid 65 129
 
 cost: the built-in 'squeeze' stepped with damage on and off; ms per frame for the whole
@@ -12,10 +12,11 @@ step, and the part spent in damage (the check, the mesh surgery and the solver's
 after a change); mesh changes, and the rebuild's ms per change (factor updates and the
 refactors they pay for, or a refactor each change). fragility: squeeze breaks and folds
 per φ. psi: the 'crumple' scenario with breaks only (no folds), mean ridge height of the
-creases and the relaxed deviation per ψ. substeps: squeeze breaks and relaxed deviation at
-1, 2 and 4 sub-steps. drift: the squeeze with every factor updated in place checked
-against its own system (a known x solved for): how many changes were taken in place, how
-many left to the Woodbury update, the worst forward error, the most terms a factor took.
+creases and the relaxed deviation per ψ. substeps: squeeze breaks, folds, the plastic set
+(hinges whose rest shape is bent) and relaxed deviation at 1, 2 and 4 sub-steps. drift: the
+squeeze with every factor updated in place checked against its own system (a known x solved
+for): how many changes were taken in place, how many left to the Woodbury update, the worst
+forward error, the most terms a factor took.
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'
 import numpy as np  # noqa: E402
 
 from paper_sim_ros.core import build_simulator, projective, relaxed_deviation  # noqa: E402
+from paper_sim_ros.core.bending import FLAT_REST  # noqa: E402
 from paper_sim_ros.core.metrics import ridge_heights  # noqa: E402
 from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping,  # noqa: E402
                                           with_overrides)
@@ -122,13 +124,18 @@ def psi(grids: list[int], psis: list[float]) -> None:
                   f'| {1e3 * heights.max():.2f} | {1e3 * relaxed_deviation(simulator):.2f} |')
 
 
-def substeps(grids: list[int]) -> None:
-    print('| grid | substeps | breaks | folds | relaxed deviation [mm] |')
-    print('|---|---|---|---|---|')
+def substeps(grids: list[int], seed: int) -> None:
+    """The squeeze's damage per sub-step count, and the plastic set it leaves: the hinges
+    whose rest shape is bent (by yield or by a fold) and the largest of those bends."""
+    print('| grid | substeps | breaks | folds | hinges with a kept bend | largest [°] '
+          '| relaxed deviation [mm] |')
+    print('|---|---|---|---|---|---|---|')
     for grid in grids:
         for count in (1, 2, 4):
-            simulator, *_ = run('squeeze', grid, {}, substeps=count)
+            simulator, *_ = run('squeeze', grid, {}, substeps=count, seed=seed)
+            kept = np.linalg.norm(simulator._bending.rest_curvature, axis=1)
             print(f'| {grid} | {count} | {simulator.breaks} | {simulator.folds} '
+                  f'| {np.count_nonzero(kept > FLAT_REST)} | {np.degrees(kept.max()):.1f} '
                   f'| {1e3 * relaxed_deviation(simulator):.2f} |')
 
 
@@ -169,6 +176,7 @@ def main() -> None:
     parser.add_argument('--grid', type=int, nargs='+', default=[33])
     parser.add_argument('--phi', type=float, nargs='+', default=[0.5, 1.0, 2.0, 4.0, 8.0])
     parser.add_argument('--psi', type=float, nargs='+', default=[0.0, 0.25, 0.5, 1.0, 1.5])
+    parser.add_argument('--seed', type=int, default=0, help='substeps: the squeeze\'s seed')
     args = parser.parse_args()
     if args.what == 'cost':
         cost(args.grid)
@@ -177,7 +185,7 @@ def main() -> None:
     elif args.what == 'psi':
         psi(args.grid, args.psi)
     elif args.what == 'substeps':
-        substeps(args.grid)
+        substeps(args.grid, args.seed)
     else:
         drift(args.grid)
 
