@@ -587,13 +587,15 @@ class Simulator:
         sheet = self.sheet
         positions, velocities = sheet.positions, sheet.velocities
         start_positions = positions.copy()
-        # the table's push inside the last solve, as a displacement [m]: its friction's share
-        self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
+        contact = self.config.contact
+        if contact.ground_enabled:
+            # the table's push inside the last solve, as a displacement [m]: its friction's
+            # share
+            self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
         # inertia, springs and bending: implicit ('constrained') or as forces
         constrained = self.config.solver.method == 'constrained'
         if constrained:
             self._air_drag(h)
-            contact = self.config.contact
             if contact.ground_enabled:
                 kernels.table_friction(velocities, self._table_support,
                                        contact.ground_friction, h)
@@ -618,16 +620,19 @@ class Simulator:
         # sheet ahead of it is dragged along instead of pulling its patch back through the
         # probe
         if self._constraint_springs.size:
-            carried = self._grip_probe >= 0
-            travel = np.linalg.norm(probe_to - probe_from, axis=1)
-            fast = self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)
-            if np.any(fast):
-                carried |= touched & ~self._chasing_fast_probes(
-                    fast, positions, start_positions, probe_from, probe_to)
-            inverse_mass = np.where(carried, 0.0, self._inverse_mass)
+            probing = bool(np.any(self.probes.active))
+            inverse_mass = self._inverse_mass
+            if probing:
+                carried = self._grip_probe >= 0
+                travel = np.linalg.norm(probe_to - probe_from, axis=1)
+                fast = self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)
+                if np.any(fast):
+                    carried |= touched & ~self._chasing_fast_probes(
+                        fast, positions, start_positions, probe_from, probe_to)
+                inverse_mass = np.where(carried, 0.0, inverse_mass)
             # a sheet pushed together on the table can only buckle up; one lying there
             # crumpled is not being pushed (lifting it would keep it moving for ever)
-            if self.config.contact.ground_enabled and np.any(self.probes.active):
+            if contact.ground_enabled and probing:
                 kernels.lift_squeezed(positions, inverse_mass, self._constraint_ends,
                                       self._constraint_rest, self.config.contact.ground_height,
                                       self.config.solver.buckling_compression)
@@ -770,9 +775,9 @@ class Simulator:
         # gripped vertices are where their probe puts them: held in the global steps like
         # pins, so that the whole sheet, not only its gripped patch, follows the probe
         gripped = self._grip_probe >= 0
-        positions[gripped] = probe_to[self._grip_probe[gripped]] + self._grip_offset[gripped]
-        positions[gripped, 2] = self.config.contact.ground_height  # pinched on the table
         if np.any(gripped):
+            positions[gripped] = probe_to[self._grip_probe[gripped]] + self._grip_offset[gripped]
+            positions[gripped, 2] = self.config.contact.ground_height  # pinched on the table
             self._slip_grips(positions)  # before the solves hold the sheet where it cannot go
         if self._global_step is None:
             return
