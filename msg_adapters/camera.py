@@ -113,9 +113,14 @@ def organized_cloud(header: Header, config: CameraConfig, frame: CameraFrame) ->
     return cloud
 
 
-def camera_messages(header: Header, config: CameraConfig,
-                    frame: CameraFrame) -> tuple[Image, Image, CameraInfo, PointCloud2]:
+def camera_messages(header: Header, config: CameraConfig, frame: CameraFrame,
+                    wanted: tuple[bool, bool, bool, bool] = (True, True, True, True)
+                    ) -> tuple[Image | None, Image | None, CameraInfo | None, PointCloud2 | None]:
     """The four messages of one camera frame under one header (in the camera's optical
-    frame): depth, colour, camera info, organised cloud."""
-    return (depth_image(header, frame), color_image(header, frame),
-            camera_info(header, config), organized_cloud(header, config, frame))
+    frame): depth, colour, camera info, organised cloud; None for those not ``wanted``
+    (built only for a topic someone reads)."""
+    builders = (lambda: depth_image(header, frame), lambda: color_image(header, frame),
+                lambda: camera_info(header, config),
+                lambda: organized_cloud(header, config, frame))
+    return tuple(build() if want else None  # type: ignore[return-value]
+                 for build, want in zip(builders, wanted))

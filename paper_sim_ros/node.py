@@ -138,6 +138,9 @@ class Statistics:
     poses_refused: int = 0
     tick_errors: int = 0
     nonfinite_skipped: int = 0
+    unread_outputs: int = 0
+    """Output messages that fell due but were not built: no reader was matched to their
+    topic (PaperSimNode._read)."""
     resets: int = 0
     window_step_seconds: float = 0.0
     window_step_max: float = 0.0
@@ -555,16 +558,20 @@ class PaperSimNode(Node):
             if recorder is not None:
                 recorder.log_inputs(self._recording_time(), simulator)
             return
+        # an output no one reads is not built (_read)
+        want_points = want_points and self._read(self._points_pub)
+        want_markers = want_markers and self._read(self._markers_pub)
+        if not (want_points or want_markers or recorder is not None):
+            return
         started = time.perf_counter()
         if not self._sheet_is_finite():
             return
         sheet = simulator.sheet
         header = Header(frame_id=settings.frame_id, stamp=self._stamp())
-        normals = vertex_normals(sheet.positions, sheet.triangles)
-        labels = simulator.damage_labels()
         if want_points:
+            normals = vertex_normals(sheet.positions, sheet.triangles)
             self._send(self._points_pub, create_cloud(header, self._cloud_points(
-                sheet, normals, labels)), header.stamp)
+                sheet, normals, simulator.damage_labels())), header.stamp)
         if colors is None and (want_markers or recorder is not None):
             colors = self._appearance.vertex_colors(sheet)
         if want_markers:
@@ -587,6 +594,16 @@ class PaperSimNode(Node):
         self._stats.window_publish_seconds += time.perf_counter() - started
         self._stats.window_publishes += 1
 
+    def _read(self, publisher) -> bool:
+        """Whether a message on ``publisher``'s topic reaches anyone: a reader matched to it,
+        or the bag. The outputs are volatile, so a message published with no reader matched
+        is lost anyway: it is not built (the demo's 65² sheet without RViz: the markers, the
+        cloud and the camera's images and organised cloud)."""
+        if self._bag is not None or publisher.get_subscription_count() > 0:
+            return True
+        self._stats.unread_outputs += 1
+        return False
+
     def _sheet_is_finite(self) -> bool:
         """False, counted and logged, if the sheet holds a NaN or infinity: never published."""
         if np.isfinite(self.simulator.sheet.positions).all():
@@ -603,6 +620,11 @@ class PaperSimNode(Node):
         due_cameras = [index for index, (camera, schedule)
                        in enumerate(zip(self._settings.cameras, self._camera_schedules))
                        if schedule.take(sim_time, camera.rate)]
+        # rendered for the recording or for the topics someone reads (_read)
+        read = {index: tuple(self._read(publisher) for publisher in self._camera_pubs[index])
+                for index in due_cameras}
+        due_cameras = [index for index in due_cameras
+                       if self._recorder is not None or any(read[index])]
         if not due_cameras:
             return None
         started = time.perf_counter()
@@ -611,13 +633,14 @@ class PaperSimNode(Node):
         stamp = self._stamp()
         colors = self._appearance.vertex_colors(self.simulator.sheet)
         for index in due_cameras:
-            self._publish_camera(index, stamp, colors)
+            self._publish_camera(index, stamp, colors, read[index])
         self._stats.window_publish_seconds += time.perf_counter() - started
         return colors
 
-    def _publish_camera(self, index: int, stamp: TimeMessage, colors: np.ndarray) -> None:
+    def _publish_camera(self, index: int, stamp: TimeMessage, colors: np.ndarray,
+                        read: tuple[bool, bool, bool, bool]) -> None:
         """What the ``index``-th virtual camera sees, its four messages under one header in
-        its optical frame."""
+        its optical frame (those of its topics that are ``read``)."""
         settings = self._settings
         camera = settings.cameras[index]
         config = camera.config
@@ -630,8 +653,9 @@ class PaperSimNode(Node):
                                              Time.from_msg(header.stamp).nanoseconds)
             self._cameras_on_tf_static.add(config.name)
         for publisher, message in zip(self._camera_pubs[index],
-                                      camera_messages(header, config, frame)):
-            self._send(publisher, message, header.stamp)
+                                      camera_messages(header, config, frame, read)):
+            if message is not None:
+                self._send(publisher, message, header.stamp)
         if self._recorder is not None:
             self._recorder.log_camera(self._recording_time(), self.simulator, config, frame)
 
@@ -692,7 +716,8 @@ class PaperSimNode(Node):
 
     # ----------------------------------------------------------------------- diagnostics
     def counters(self) -> dict[str, int]:
-        """Totals since start: frames stepped and slipped, publications dropped, poses."""
+        """Totals since start: frames stepped and slipped, publications dropped, outputs not
+        built for want of a reader, poses."""
         stats = self._stats
         return {
             'frames_stepped': stats.frames_stepped,
@@ -702,6 +727,7 @@ class PaperSimNode(Node):
             'dropped_markers': self._markers_schedule.dropped,
             'poses_received': stats.poses_received,
             'poses_refused': stats.poses_refused,
+            'unread_outputs': stats.unread_outputs,
             'resets': stats.resets,
             'tick_errors': stats.tick_errors,
         }

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_srvs.srv import Trigger
@@ -15,6 +16,7 @@ from std_srvs.srv import Trigger
 from paper_sim_ros.core.camera import HIT_PAPER
 from paper_sim_ros.msg_adapters.camera import PIXEL_DTYPE
 from paper_sim_ros.node_parameters import declared_defaults, settings_from_values
+from paper_sim_ros.rerun_replay import read_chunks
 from ros_harness import RosClient, new_domain_id, start_node, stop_cleanly
 
 WIDTH, HEIGHT, FOV, RATE = 160, 120, 1.0, 10.0
@@ -207,3 +209,42 @@ def test_bad_camera_parameters_are_refused_with_a_reason(name, value, reason):
     values[name] = value
     with pytest.raises(ValueError, match=reason):
         settings_from_values(values)
+
+
+@pytest.mark.slow
+def test_an_output_no_one_reads_is_skipped_and_a_recorded_camera_still_renders(tmp_path):
+    """With a reader on the camera's info only: the info arrives at the camera's rate, the
+    outputs nobody reads (cloud, markers, the camera's images and organised cloud) are
+    skipped and counted in diagnostics, and the Rerun recording still holds every camera
+    frame. A reader that comes later gets the cloud from then on."""
+    path = tmp_path / 'unread.rrd'
+    domain = new_domain_id()
+    process = start_node(tmp_path, {
+        'sheet.nx': 9, 'sheet.ny': 9, 'publish_rate': 10.0, 'markers_rate': 5.0,
+        'cameras': ['top'], 'top.rate': RATE, 'top.width': 32, 'top.height': 24,
+        'rerun_path': str(path), 'diagnostics_rate': 5.0}, domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(CameraInfo, TOPICS['info'][0])
+        client.subscribe(DiagnosticArray, '/diagnostics')
+
+        def unread() -> int:
+            latest = client.latest('/diagnostics')
+            values = {pair.key: pair.value for pair in latest.status[0].values} \
+                if latest is not None else {}
+            return int(values.get('unread_outputs', 0))
+        client.spin_until(lambda: len(client.messages(TOPICS['info'][0])) >= 10
+                          and unread() >= 20, 90,
+                          'ten camera infos and twenty outputs skipped', process)
+        assert not client.messages('paper/points')
+        client.subscribe(PointCloud2, 'paper/points')
+        client.spin_until(lambda: len(client.messages('paper/points')) >= 3, 30,
+                          'the cloud, once it has a reader', process)
+    finally:
+        client.close()
+        stop_cleanly(process)
+    depth_frames = sum(len(chunk.to_record_batch().column('DepthImage:buffer'))
+                       for chunk in read_chunks(str(path))
+                       if chunk.entity_path == '/paper/cameras/top/depth')
+    # every camera frame recorded, read or not: at least those whose info arrived
+    assert depth_frames >= len(client.messages(TOPICS['info'][0])) >= 10
