@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/contact_sweep.py [--scenarios press drag ...] [--grids 33 65]
         [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4] [--energy-restoring]
-        [--length-projection] [--membrane 30]
+        [--length-projection] [--membrane 30 [--membrane-iterations 10]]
 
 Per run: max HINGE strain over the run, deepest vertex inside a probe and below the table
 (beyond a pressed probe's dimple), breaks, folds, relaxed deviation, mesh validity, mass
@@ -88,11 +88,15 @@ def main(argv: list[str] | None = None) -> int:
                         help='solver.length_projection on (docs/solver.md)')
     parser.add_argument('--membrane', type=float, default=0.0,
                         help='solver.membrane_weight (core/membrane.py; 0: none)')
+    parser.add_argument('--membrane-iterations', type=int, default=None,
+                        help='solver.membrane_iterations (default: the solver\'s)')
     args = parser.parse_args(argv)
     options = {option: True for option in ('energy_restoring', 'length_projection')
                if getattr(args, option)}
     if args.membrane:
         options['membrane_weight'] = args.membrane
+    if args.membrane_iterations is not None:
+        options['membrane_iterations'] = args.membrane_iterations
     runs = [(name, grid, seed, not args.no_damage, args.substeps, options)
             for name in args.scenarios for grid in args.grids for seed in args.seeds]
     results = []
