@@ -119,8 +119,8 @@ def camera_messages(header: Header, config: CameraConfig, frame: CameraFrame,
     """The four messages of one camera frame under one header (in the camera's optical
     frame): depth, colour, camera info, organised cloud; None for those not ``wanted``
     (built only for a topic someone reads)."""
-    builders = (lambda: depth_image(header, frame), lambda: color_image(header, frame),
-                lambda: camera_info(header, config),
-                lambda: organized_cloud(header, config, frame))
-    return tuple(build() if want else None  # type: ignore[return-value]
-                 for build, want in zip(builders, wanted))
+    depth, color, info, cloud = wanted
+    return (depth_image(header, frame) if depth else None,
+            color_image(header, frame) if color else None,
+            camera_info(header, config) if info else None,
+            organized_cloud(header, config, frame) if cloud else None)

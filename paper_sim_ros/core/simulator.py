@@ -154,9 +154,10 @@ class Simulator:
         """The probes that rise off the sheet in the current sub-step (no rows but for what
         a solve carries deep into them: DEEP_IN_RISING_PROBE)."""
         self._rising_indices = np.zeros(0, dtype=np.int64)
+        """``_rising_probes`` as indices."""
         self._gripped = np.zeros(0, dtype=bool)
-        """The vertices gripped in the current sub-step's solves (as ``_rising_indices``,
-        fixed for its solves: ``_settle_contact_rows`` reads them after every solve)."""
+        """The vertices gripped in the current sub-step's solves. Both are fixed for its
+        solves: ``_settle_contact_rows`` reads them after every solve."""
         self._start_positions = np.zeros((0, 3))
         """Where the sheet was at the start of the current sub-step."""
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
@@ -634,7 +635,7 @@ class Simulator:
             # crumpled is not being pushed (lifting it would keep it moving for ever)
             if contact.ground_enabled and probing:
                 kernels.lift_squeezed(positions, inverse_mass, self._constraint_ends,
-                                      self._constraint_rest, self.config.contact.ground_height,
+                                      self._constraint_rest, contact.ground_height,
                                       self.config.solver.buckling_compression)
             self._limit_strain(positions, start_positions, probe_from, probe_to, inverse_mass)
 
@@ -1010,7 +1011,7 @@ class Simulator:
         self._rising_indices = np.flatnonzero(self._rising_probes)
         self._gripped = self._grip_probe >= 0
         self._start_positions = start_positions
-        gripped = np.flatnonzero((self._grip_probe >= 0) & ~self._grip_pinned)
+        gripped = np.flatnonzero(self._gripped & ~self._grip_pinned)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
         self._contact(positions, start_positions, probe_from, probe_to, True, touched,
                       table_friction=False)
