@@ -77,12 +77,15 @@ def main() -> None:
     parser.add_argument('--width', type=float, default=0.02)
     parser.add_argument('--length-projection', action='store_true',
                         help='solver.length_projection on (core/length_projection.py)')
-    parser.add_argument('--membrane', type=float, default=0.0,
-                        help='solver.membrane_weight (core/membrane.py)')
+    parser.add_argument('--membrane', type=float, default=None,
+                        help='the membrane at this weight in every sub-step (solver.'
+                        "membrane_weight, membrane_scope 'always'; core/membrane.py)")
     parser.add_argument('--membrane-iterations', type=int, default=None,
                         help='solver.membrane_iterations')
     args = parser.parse_args()
-    solver = {'length_projection': args.length_projection, 'membrane_weight': args.membrane}
+    solver = {'length_projection': args.length_projection}
+    if args.membrane is not None:
+        solver.update(membrane_weight=args.membrane, membrane_scope='always')
     if args.membrane_iterations is not None:
         solver['membrane_iterations'] = args.membrane_iterations
     drooped_tip_angle(0.02, 0.01, args.width, solver)  # numba compiled

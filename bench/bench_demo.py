@@ -27,17 +27,18 @@ PROBE_RADIUS = 0.02
 """The demo's probe radius [m] (config/paper_sim.yaml, probe_radii)."""
 
 
-def demo_scene(grid: int, duration: float, membrane: float = 0.0):
+def demo_scene(grid: int, duration: float, membrane: float | None = None):
     """The demo's scenario: the node's defaults with the demo's overrides (demo.py);
-    ``membrane``: solver.membrane_weight."""
+    ``membrane``: the membrane's weight in every sub-step (None: the solver's default)."""
     return load_scenario({
         'name': 'demo', 'duration': duration, 'pin': 'short_edge',
         'sheet': {'nx': grid, 'ny': grid, 'elevation': 0.0},
-        'solver': {'membrane_weight': membrane},
+        'solver': ({} if membrane is None
+                   else {'membrane_weight': membrane, 'membrane_scope': 'always'}),
         'contact': {'ground_enabled': True, 'ground_height': -0.2}})
 
 
-def run(grid: int, duration: float, membrane: float = 0.0) -> dict:
+def run(grid: int, duration: float, membrane: float | None = None) -> dict:
     """Step the demo's scene; frame times [s] and strains per frame."""
     scenario = demo_scene(grid, duration, membrane)
     simulator = build_simulator(scenario)
@@ -61,8 +62,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--grids', type=int, nargs='+', default=[33, 65])
     parser.add_argument('--duration', type=float, default=20.0)
-    parser.add_argument('--membrane', type=float, default=0.0,
-                        help='solver.membrane_weight (core/membrane.py; 0: none)')
+    parser.add_argument('--membrane', type=float, default=None,
+                        help="the membrane at this weight in every sub-step (membrane_scope "
+                        "'always'; 0: none; default: the solver's)")
     args = parser.parse_args()
     run(17, 1.0, args.membrane)  # numba compilation
     print('| grid | real-time factor | ms a frame (p95) | max strain, run | last second |')

@@ -26,7 +26,8 @@ from paper_sim_ros.warmup import warm_up  # noqa: E402
 SOLVER_OPTIONS = {
     'constrained (default)': {},
     'constrained, len. proj.': {'length_projection': True},
-    'constrained, membrane 30': {'membrane_weight': 30.0},
+    'constrained, no membrane': {'membrane_weight': 0.0},
+    'constrained, membrane 30': {'membrane_weight': 30.0, 'membrane_scope': 'always'},
     'paper Eq.6, 10 Jacobi': {'method': 'paper', 'jacobi_iterations': 10},
     'paper Eq.6, 100 Jacobi': {'method': 'paper', 'jacobi_iterations': 100},
 }

@@ -86,15 +86,16 @@ def main(argv: list[str] | None = None) -> int:
                         help='solver.energy_restoring on (docs/solver.md)')
     parser.add_argument('--length-projection', action='store_true',
                         help='solver.length_projection on (docs/solver.md)')
-    parser.add_argument('--membrane', type=float, default=0.0,
-                        help='solver.membrane_weight (core/membrane.py; 0: none)')
+    parser.add_argument('--membrane', type=float, default=None,
+                        help="the membrane at this weight in every sub-step (membrane_scope "
+                        "'always'; 0: none; default: the solver's)")
     parser.add_argument('--membrane-iterations', type=int, default=None,
                         help='solver.membrane_iterations (default: the solver\'s)')
     args = parser.parse_args(argv)
     options = {option: True for option in ('energy_restoring', 'length_projection')
                if getattr(args, option)}
-    if args.membrane:
-        options['membrane_weight'] = args.membrane
+    if args.membrane is not None:
+        options.update(membrane_weight=args.membrane, membrane_scope='always')
     if args.membrane_iterations is not None:
         options['membrane_iterations'] = args.membrane_iterations
     runs = [(name, grid, seed, not args.no_damage, args.substeps, options)

@@ -136,6 +136,7 @@ def _wild(rng: np.random.Generator) -> dict:
         mapping['contact']['probe_friction'] = float(rng.uniform(0.0, 1.5))
     if rng.random() < 0.2:  # drawn last: the earlier draws of an index stay as they were
         mapping['solver']['membrane_weight'] = float(rng.choice([0.5, 30.0, 3000.0]))
+        mapping['solver']['membrane_scope'] = str(rng.choice(['squeezed', 'always']))
     return mapping
 
 
@@ -157,12 +158,13 @@ def _alarm(signum, frame):
     raise _TooSlow()
 
 
-def measure(family: str, index: int, time_limit: int, membrane: float = 0.0) -> dict:
-    """One run (``membrane``: solver.membrane_weight, where not 0): its figures, or what
-    went wrong."""
+def measure(family: str, index: int, time_limit: int, membrane: float | None = None) -> dict:
+    """One run (``membrane``: the membrane's weight in every sub-step, None: the scene's
+    own): its figures, or what went wrong."""
     mapping = scene(family, index)
-    if membrane:
-        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': membrane}
+    if membrane is not None:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': membrane,
+                             'membrane_scope': 'always'}
     record = {'family': family, 'index': index, 'problems': []}
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(time_limit)
@@ -201,8 +203,9 @@ def main() -> None:
     parser.add_argument('--start', type=int, default=0, help='first run index')
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--time-limit', type=int, default=200, help='seconds a run may take')
-    parser.add_argument('--membrane', type=float, default=0.0,
-                        help='solver.membrane_weight in every run (core/membrane.py)')
+    parser.add_argument('--membrane', type=float, default=None,
+                        help="the membrane at this weight in every sub-step of every run "
+                        "(membrane_scope 'always'; 0: none)")
     args = parser.parse_args()
     runs = [(family, index, args.time_limit, args.membrane) for family in args.family
             for index in range(args.start, args.start + args.count)]

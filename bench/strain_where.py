@@ -31,13 +31,15 @@ def main() -> None:
     parser.add_argument('--substeps', type=int, default=None,
                         help="sub-steps per frame (default: the scenario's own)")
     parser.add_argument('--every', type=int, default=6, help='frames between lines')
-    parser.add_argument('--membrane', type=float, default=0.0,
-                        help='solver.membrane_weight (core/membrane.py; 0: none)')
+    parser.add_argument('--membrane', type=float, default=None,
+                        help="the membrane at this weight in every sub-step (membrane_scope "
+                        "'always'; 0: none; default: the solver's)")
     arguments = parser.parse_args()
     mapping = with_overrides(builtin_mapping(arguments.scenario), grid=arguments.grid,
                              seed=arguments.seed, substeps=arguments.substeps)
-    mapping['solver'] = {**(mapping.get('solver') or {}),
-                         'membrane_weight': arguments.membrane}
+    if arguments.membrane is not None:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight':
+                             arguments.membrane, 'membrane_scope': 'always'}
     scenario = load_scenario(mapping)
     simulator = build_simulator(scenario)
     dt = scenario.config.solver.dt

@@ -20,8 +20,8 @@ from typing import Any, Mapping
 
 from .core.appearance import FULL_DETAIL_LEVEL, AppearanceConfig
 from .core.camera import DEFAULT_POSITION, DEFAULT_TARGET, CameraConfig, camera_looking_at
-from .core.config import (SOLVERS, ContactConfig, DamageConfig, SheetConfig, SimulationConfig,
-                          SolverConfig, from_mapping)
+from .core.config import (MEMBRANE_SCOPES, SOLVERS, ContactConfig, DamageConfig, SheetConfig,
+                          SimulationConfig, SolverConfig, from_mapping)
 from .core.materials import MATERIAL_PRESETS, material_preset
 from .core.scenarios import PIN_MODES, ScenarioCamera
 from .core.simulator import BUCKLING_PROGRESS
@@ -177,9 +177,12 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'deflections, several times slower).'),
     ParameterSpec('solver.membrane_weight', _SOLVER.membrane_weight,
                   "The held springs as a membrane in the bending solve, each of weight this "
-                  "x B / rest length^2 ('constrained'; 0: none; 30: a drooping strip at the "
-                  'elastica, a squeezed sheet kept from crushing, 1.5-3 times slower).',
-                  (0.0, 1.0e6)),
+                  "x B / rest length^2 ('constrained'; 0: none; 30: a squeezed sheet's arch "
+                  'kept from crushing).', (0.0, 1.0e6)),
+    ParameterSpec('solver.membrane_scope', _SOLVER.membrane_scope,
+                  f'Sub-steps that take the membrane, one of {", ".join(MEMBRANE_SCOPES)}: '
+                  'squeezed, only while probes push the sheet together; always, every one (a '
+                  'drooping strip at the elastica, 1.5-4 times slower).'),
     ParameterSpec('solver.membrane_iterations', _SOLVER.membrane_iterations,
                   "Conjugate-gradient iterations of the membrane's solve per sub-step, at "
                   'most (each a bending solve).', (0, 1000)),

@@ -36,11 +36,15 @@ def squeeze_mapping(grid: int = 33, **damage) -> dict:
 
 
 def run_squeeze(substeps: int = 1, seed: int = 0, enabled: bool = True,
-                fragility: float = 1.0, relax: bool = True, grid: int = 33) -> dict:
+                fragility: float = 1.0, relax: bool = True, grid: int = 33,
+                membrane: bool = True) -> dict:
     """Metrics of the squeeze, 33 × 33 unless told. Without ``relax`` only the 3 s in which
-    the probes act are run (no relaxation metrics)."""
+    the probes act are run (no relaxation metrics); without ``membrane`` the squeezed sheet
+    is crushed, as built before the membrane (it then breaks and folds far more)."""
     mapping = with_overrides(squeeze_mapping(grid, enabled=enabled, fragility=fragility),
                              substeps=substeps, seed=seed, duration=None if relax else 3.0)
+    if not membrane:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 0.0}
     scenario = scenario_from_mapping(mapping)
     simulator = build_simulator(scenario)
     mass = exact_mass(simulator.sheet)
@@ -376,9 +380,11 @@ def test_a_break_never_puts_its_vertex_into_a_fingertip_or_under_the_table(seed)
     was at times inside a fingertip (33², seeds 0, 1, 3: 2.5, 2.2, 2.6 mm deep) or under
     the table (65², seed 0: 0.6 mm), the squeeze's only penetrations. Issue 13 asks no
     vertex deeper than 0.5 mm; now none is (Simulator._keep_creases_out). Seeds whose
-    squeeze breaks (1, 3 and 8 breaks since Eq. 7 is drawn as a hazard; seed 3 none)."""
-    scenario = scenario_from_mapping(with_overrides(squeeze_mapping(33), seed=seed,
-                                                    duration=3.0))
+    squeeze breaks (1, 3 and 8 breaks since Eq. 7 is drawn as a hazard; seed 3 none),
+    without the membrane that keeps a squeezed sheet from crushing (with it, 0-1 break)."""
+    mapping = with_overrides(squeeze_mapping(33), seed=seed, duration=3.0)
+    mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 0.0}
+    scenario = scenario_from_mapping(mapping)
     simulator = build_simulator(scenario)
     dt = scenario.config.solver.dt
     deepest = 0.0
@@ -393,9 +399,11 @@ def test_a_break_never_puts_its_vertex_into_a_fingertip_or_under_the_table(seed)
 
 @pytest.mark.slow
 def test_same_seed_same_damage_other_seed_other_damage(squeeze):
-    first = squeeze(seed=5, relax=False)
-    second = run_squeeze(seed=5, relax=False)  # run again, not read from the cache
-    other = squeeze(seed=6, relax=False)
+    # without the membrane: with it the 33² squeeze rarely breaks, and a run without damage
+    # events is the same at every seed
+    first = squeeze(seed=5, relax=False, membrane=False)
+    second = run_squeeze(seed=5, relax=False, membrane=False)  # run again, not from the cache
+    other = squeeze(seed=6, relax=False, membrane=False)
     for key in ('final_positions_sha256', 'breaks', 'folds'):
         assert first[key] == second[key], key
     assert other['final_positions_sha256'] != first['final_positions_sha256']
@@ -606,7 +614,9 @@ def test_a_crumpled_sheet_in_free_flight_keeps_its_momentum(seed, option):
     velocities less the rigid motion, so it keeps them too; the length projection moves
     the ends of a spring along it in inverse proportion to their masses; the membrane's
     terms come in equal and opposite pairs."""
-    options = {option: 30.0 if option == 'membrane_weight' else True} if option else {}
+    options = {option: True} if option else {}
+    if option == 'membrane_weight':  # in every sub-step: nothing squeezes this sheet
+        options = {'membrane_weight': 30.0, 'membrane_scope': 'always'}
     simulator = _spun_crumpled_sheet(17, seed, air_damping=0.0, air_density=0.0, **options)
     linear, angular = _momenta(simulator)
     for _ in range(300):

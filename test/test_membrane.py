@@ -140,19 +140,39 @@ def test_conjugate_gradients_reach_the_coupled_solution_under_the_rows():
     assert np.abs(alone - expected).max() > 1e-4
 
 
-def test_with_the_membrane_a_squeezed_sheet_arches_instead_of_crushing():
-    """`squeeze` at 33², one sub-step: the two fingertips push the sheet together on the
-    table. The split solve crushes it (measured 114.9 %, 1 break, 60 folds); with the held
-    springs in the bending solve the arch carries the thrust: measured 20.1 %, no fold, no
-    break, nothing inside a fingertip or the table, the mesh valid."""
-    mapping = with_overrides(builtin_mapping('squeeze'), grid=33, seed=0)
-    mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 30.0}
-    metrics = run_scenario(load_scenario(mapping))
+@pytest.mark.parametrize('seed', [0, 4])
+def test_a_squeezed_sheet_arches_instead_of_crushing(seed):
+    """`squeeze` at 33², one sub-step, as built: the two fingertips push the sheet together
+    on the table, and while they do the bending solve takes the held springs as a membrane
+    (``membrane_scope`` 'squeezed'). Without it the split solve crushes the sheet
+    (measured 114.9 / 230.1 % at seeds 0 / 4, 1 / 8 breaks, 60 / 102 folds); with it the
+    arch carries the thrust: measured 20.1 / 22.1 %, no fold, 0 / 1 break, nothing inside
+    a fingertip or the table, the mesh valid."""
+    metrics = run_scenario(load_scenario(with_overrides(builtin_mapping('squeeze'), grid=33,
+                                                        seed=seed)))
     assert metrics['max_strain'] < 0.25
-    assert metrics['folds'] == 0 and metrics['breaks'] == 0
+    assert metrics['folds'] == 0 and metrics['breaks'] <= 1
     assert metrics['max_probe_penetration_m'] < 5e-4
     assert metrics['max_table_penetration_m'] < 5e-4
     assert metrics['mesh_valid'] and not metrics['nan']
+
+
+def test_a_sheet_no_probe_squeezes_steps_as_without_the_membrane():
+    """The membrane's scope: a hanging sheet swinging into a probe that does not pinch or
+    lift off it, and one with no probe at all, step to the same bits with the membrane as
+    built ('squeezed') as with none, so they pay nothing for it; in every sub-step
+    ('always') the same sheet moves otherwise."""
+    def final(scenario: str, **solver) -> np.ndarray:
+        mapping = with_overrides(builtin_mapping(scenario), grid=17, duration=1.0)
+        mapping['solver'] = {**(mapping.get('solver') or {}), **solver}
+        scenario = load_scenario(mapping)
+        simulator = build_simulator(scenario)
+        run_scenario(scenario, simulator=simulator)
+        return simulator.sheet.positions.copy()
+    for scenario in ('hanging', 'poke'):
+        as_built = final(scenario)
+        assert np.array_equal(as_built, final(scenario, membrane_weight=0.0))
+        assert not np.array_equal(as_built, final(scenario, membrane_scope='always'))
 
 
 def test_a_sheet_landing_on_the_table_with_the_membrane_stays_above_it():
@@ -162,7 +182,8 @@ def test_a_sheet_landing_on_the_table_with_the_membrane_stays_above_it():
     the sub-step's starting directions (0.49 mm below it, measured): a landing's turn is
     the table's. Every frame keeps every vertex above the table within 0.05 mm."""
     mapping = with_overrides(builtin_mapping('aged'), grid=33, seed=0)
-    mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 30.0}
+    mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 30.0,
+                         'membrane_scope': 'always'}
     simulator = build_simulator(load_scenario(mapping))
     for _ in range(30):
         simulator.step_frame()

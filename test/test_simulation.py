@@ -500,6 +500,7 @@ def test_absurd_sheet_parameters_are_refused(field, value):
                                           ('membrane_weight', -1.0),
                                           ('membrane_weight', float('nan')),
                                           ('membrane_iterations', 2.5),
+                                          ('membrane_scope', 'sometimes'),
                                           ('air_density', -1.0),
                                           ('drag_coefficient', float('inf'))])
 def test_absurd_solver_parameters_are_refused(field, value):

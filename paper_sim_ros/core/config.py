@@ -10,6 +10,7 @@ from dataclasses import dataclass, field, fields
 import math
 
 SOLVERS = ('constrained', 'paper', 'explicit')
+MEMBRANE_SCOPES = ('squeezed', 'always')
 
 
 def _require(condition: bool, message: str) -> None:
@@ -129,10 +130,18 @@ class SolverConfig:
     the elastica's tip angle at large deflections too (within 2 % up to 72°, where it is
     8–14 % short without), at a cost (docs/solver.md). Off by default: it makes a hanging
     sheet several times slower, and its swing strains more (1.1 % against 0.35 %, 65²)."""
-    membrane_weight: float = 0.0
+    membrane_weight: float = 30.0
     """('constrained') The held springs' membrane in the bending solve, its weight per
     spring this × B / l0² (core/membrane.py; 0: none): the bending solve then keeps the
-    edges' lengths while it turns them, which the springs' iterations alone cannot."""
+    edges' lengths while it turns them, which the springs' iterations alone cannot.
+    Where it runs: ``membrane_scope``."""
+    membrane_scope: str = 'squeezed'
+    """('constrained') Which sub-steps take the membrane: 'squeezed', only those in which
+    probes push the sheet together (a fingertip pinches it on the table or a probe lifts
+    off it, and a held spring is squeezed beyond ``buckling_compression``: the arch it
+    buckles into is crushed without the membrane, docs/contact.md), so a sheet nothing
+    squeezes steps as fast as without it; 'always', every sub-step (a drooping strip then
+    settles at the elastica at every deflection, at 2-4 times the cost: docs/solver.md)."""
     membrane_iterations: int = 10
     """Conjugate-gradient iterations of the membrane's solve per sub-step, at most (each
     a bending solve)."""
@@ -167,6 +176,9 @@ class SolverConfig:
                  f'buckling_compression must be in (0, 1), got {self.buckling_compression!r}')
         _finite_positive('global_stiffness', self.global_stiffness)
         _finite_non_negative('membrane_weight', self.membrane_weight)
+        _require(self.membrane_scope in MEMBRANE_SCOPES,
+                 f'membrane_scope must be one of {MEMBRANE_SCOPES}, '
+                 f'got {self.membrane_scope!r}')
         _require(len(self.gravity) == 3 and all(math.isfinite(g) for g in self.gravity),
                  f'gravity must be three finite numbers, got {self.gravity!r}')
         _require(isinstance(self.energy_restoring, bool),

@@ -158,6 +158,9 @@ class Simulator:
         self._gripped = np.zeros(0, dtype=bool)
         """The vertices gripped in the current sub-step's solves. Both are fixed for its
         solves: ``_settle_contact_rows`` reads them after every solve."""
+        self._lifting_off = np.zeros(0, dtype=bool)
+        """The probes that pinch the sheet on the table, or have pinched it and rise since
+        without a pause (a fingertip lifting off: _membrane_runs)."""
         self._start_positions = np.zeros((0, 3))
         """Where the sheet was at the start of the current sub-step."""
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
@@ -795,7 +798,7 @@ class Simulator:
         np.multiply(positions, inertia_weight, out=weighted_inertia)
         self._bending.add_targets(positions, weighted_inertia)
         self._bending_solve(weighted_inertia, positions, inertia_weight[:, 0])
-        if solver.membrane_weight > 0.0 and self._held_ends.size:
+        if self._membrane_runs(positions):
             self._membrane_solve(weighted_inertia, positions, start_positions)
         if solver.length_projection and self._constraint_springs.size:
             # the edges turn towards their lengths before the iterations rebuild the sheet
@@ -846,6 +849,26 @@ class Simulator:
             self._bending_step.solve(rhs, positions, *self._rows)
         elif not self._table_rows(rhs, positions):
             self._table_uzawa(rhs, positions, mass_over_h2)
+
+    def _membrane_runs(self, positions) -> bool:
+        """Whether this sub-step's bending solve takes the held springs' membrane
+        (``membrane_scope``). 'squeezed': while probes push the sheet together, that is a
+        fingertip pinches it on the table or a probe lifts off it, and the bending solve
+        left a held spring squeezed beyond ``buckling_compression``. (A probe that rises
+        through a sheet it never pinched lets go of it as before: the membrane there kept
+        the sheet's lengths by pulling it back through the probe.) Alone, that solve
+        crushes the arch a squeezed sheet buckles into and the compression goes sideways
+        into the sheet (docs/contact.md); a sheet nothing squeezes (hanging, swinging,
+        crumpled at rest, poked) steps as it would without the membrane, at its cost."""
+        solver = self.config.solver
+        if not (solver.membrane_weight > 0.0 and self._held_ends.size):
+            return False
+        if solver.membrane_scope == 'always':
+            return True
+        pushed = self.probes.count and np.any(self._lifting_off)
+        return bool(pushed) and kernels.any_squeezed(positions, self._held_ends,
+                                                     self._held_rest,
+                                                     solver.buckling_compression)
 
     def _membrane_solve(self, rhs, positions, start_positions) -> None:
         """The bending solve again with the held springs as a membrane (core/membrane.py),
@@ -1010,6 +1033,11 @@ class Simulator:
         self._rising_probes = lifted & rising
         self._rising_indices = np.flatnonzero(self._rising_probes)
         self._gripped = self._grip_probe >= 0
+        pinching = np.zeros(self.probes.count, dtype=bool)
+        pinching[self._grip_probe[self._gripped]] = True
+        if self._lifting_off.shape != pinching.shape:
+            self._lifting_off = np.zeros_like(pinching)
+        self._lifting_off = (self._lifting_off & self._rising_probes) | pinching
         self._start_positions = start_positions
         gripped = np.flatnonzero(self._gripped & ~self._grip_pinned)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
