@@ -29,9 +29,13 @@ def exact_mass(sheet) -> float:
     return math.fsum(sheet.vertex_mass.tolist())
 
 
-def squeeze_mapping(grid: int = 33, **damage) -> dict:
+def squeeze_mapping(grid: int = 33, membrane: bool = True, **damage) -> dict:
+    """The squeeze at ``grid``² with ``damage`` settings; without ``membrane`` the squeezed
+    sheet is crushed, as built before the membrane (it then breaks and folds far more)."""
     mapping = with_overrides(builtin_mapping('squeeze'), grid=grid)
     mapping['damage'] = damage
+    if not membrane:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 0.0}
     return mapping
 
 
@@ -39,12 +43,10 @@ def run_squeeze(substeps: int = 1, seed: int = 0, enabled: bool = True,
                 fragility: float = 1.0, relax: bool = True, grid: int = 33,
                 membrane: bool = True) -> dict:
     """Metrics of the squeeze, 33 × 33 unless told. Without ``relax`` only the 3 s in which
-    the probes act are run (no relaxation metrics); without ``membrane`` the squeezed sheet
-    is crushed, as built before the membrane (it then breaks and folds far more)."""
-    mapping = with_overrides(squeeze_mapping(grid, enabled=enabled, fragility=fragility),
+    the probes act are run (no relaxation metrics); ``membrane``: squeeze_mapping's."""
+    mapping = with_overrides(squeeze_mapping(grid, membrane, enabled=enabled,
+                                             fragility=fragility),
                              substeps=substeps, seed=seed, duration=None if relax else 3.0)
-    if not membrane:
-        mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 0.0}
     scenario = scenario_from_mapping(mapping)
     simulator = build_simulator(scenario)
     mass = exact_mass(simulator.sheet)
@@ -382,9 +384,8 @@ def test_a_break_never_puts_its_vertex_into_a_fingertip_or_under_the_table(seed)
     vertex deeper than 0.5 mm; now none is (Simulator._keep_creases_out). Seeds whose
     squeeze breaks (1, 3 and 8 breaks since Eq. 7 is drawn as a hazard; seed 3 none),
     without the membrane that keeps a squeezed sheet from crushing (with it, 0-1 break)."""
-    mapping = with_overrides(squeeze_mapping(33), seed=seed, duration=3.0)
-    mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 0.0}
-    scenario = scenario_from_mapping(mapping)
+    scenario = scenario_from_mapping(with_overrides(squeeze_mapping(33, membrane=False),
+                                                    seed=seed, duration=3.0))
     simulator = build_simulator(scenario)
     dt = scenario.config.solver.dt
     deepest = 0.0

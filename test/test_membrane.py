@@ -158,21 +158,21 @@ def test_a_squeezed_sheet_arches_instead_of_crushing(seed):
 
 
 def test_a_sheet_no_probe_squeezes_steps_as_without_the_membrane():
-    """The membrane's scope: a hanging sheet swinging into a probe that does not pinch or
-    lift off it, and one with no probe at all, step to the same bits with the membrane as
-    built ('squeezed') as with none, so they pay nothing for it; in every sub-step
-    ('always') the same sheet moves otherwise."""
-    def final(scenario: str, **solver) -> np.ndarray:
-        mapping = with_overrides(builtin_mapping(scenario), grid=17, duration=1.0)
+    """The membrane's scope: a hanging sheet, and one a probe pushes into and sweeps across
+    without pinching it (`poke`, whole runs at 17²), step to the same bits with the
+    membrane as built ('squeezed') as with none, so they pay nothing for it; in every
+    sub-step ('always') the same sheet moves otherwise."""
+    def final(name: str, **solver) -> np.ndarray:
+        mapping = with_overrides(builtin_mapping(name), grid=17)
         mapping['solver'] = {**(mapping.get('solver') or {}), **solver}
         scenario = load_scenario(mapping)
         simulator = build_simulator(scenario)
         run_scenario(scenario, simulator=simulator)
         return simulator.sheet.positions.copy()
-    for scenario in ('hanging', 'poke'):
-        as_built = final(scenario)
-        assert np.array_equal(as_built, final(scenario, membrane_weight=0.0))
-        assert not np.array_equal(as_built, final(scenario, membrane_scope='always'))
+    for name in ('hanging', 'poke'):
+        as_built = final(name)
+        assert np.array_equal(as_built, final(name, membrane_weight=0.0))
+        assert not np.array_equal(as_built, final(name, membrane_scope='always'))
 
 
 def test_a_sheet_landing_on_the_table_with_the_membrane_stays_above_it():

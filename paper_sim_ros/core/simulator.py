@@ -865,10 +865,8 @@ class Simulator:
             return False
         if solver.membrane_scope == 'always':
             return True
-        pushed = self.probes.count and np.any(self._lifting_off)
-        return bool(pushed) and kernels.any_squeezed(positions, self._held_ends,
-                                                     self._held_rest,
-                                                     solver.buckling_compression)
+        return bool(np.any(self._lifting_off)) and kernels.any_squeezed(
+            positions, self._held_ends, self._held_rest, solver.buckling_compression)
 
     def _membrane_solve(self, rhs, positions, start_positions) -> None:
         """The bending solve again with the held springs as a membrane (core/membrane.py),
@@ -1020,6 +1018,7 @@ class Simulator:
         self._factor_grips()
         if not self.probes.count:  # nothing to hold (nor gripped: grips need a probe)
             self._rows, self._contact_row = NO_ROWS, np.zeros(0, dtype=bool)
+            self._lifting_off = np.zeros(0, dtype=bool)
             return
         # the probes that hold what they reach in this sub-step's solves (_inside_probes):
         # a probe pressed into the table pinches what it reaches there (_grip), and the
