@@ -629,7 +629,11 @@ class Simulator:
             if probing:
                 carried = self._grip_probe >= 0
                 travel = np.linalg.norm(probe_to - probe_from, axis=1)
-                fast = self.probes.active & (travel > FAST_PROBE_TRAVEL * self.probes.radius)
+                # a fingertip whose grip slipped slides over the paper it pinches on the
+                # table and cannot tunnel through it: carried, what its rim touched was
+                # dragged off the paper pinched under its pad (random pinned scene 5005)
+                fast = self.probes.active & ~self._sliding \
+                    & (travel > FAST_PROBE_TRAVEL * self.probes.radius)
                 if np.any(fast):
                     carried |= touched & ~self._chasing_fast_probes(
                         fast, positions, start_positions, probe_from, probe_to)
