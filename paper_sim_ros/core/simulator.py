@@ -101,11 +101,12 @@ docs/solver.md)."""
 
 CONTACT_TOLERANCE = 1e-5
 """Depth inside a probe [m] at which a vertex without a contact row gets one."""
-DEEP_IN_RISING_PROBE = 0.5
+DEEP_IN_RISING_PROBE = 0.1
 """A rising probe holds no rows, but a vertex a solve carries deeper than this share of its
 radius into it gets one (Simulator._settle_contact_rows): pushed out after the solve from
-near the centre, neighbours left on opposite sides of the probe (a squeeze's lift-off,
-docs/contact.md)."""
+near the centre, neighbours left on opposite sides of the probe (a squeeze's lift-off), and
+from under it the paper springing up wrapped round its cap (half the radius: a fingertip
+lifting off a pushed-up sheet, 24-31 % with four sub-steps; docs/contact.md)."""
 
 
 class Simulator:
