@@ -824,13 +824,9 @@ def test_a_factor_updated_in_place_solves_its_system_or_declines():
     assert taken >= 5 and declined >= 100, (taken, declined)
 
 
-def test_a_factor_update_dearer_than_a_new_factor_is_declined():
-    """GlobalStep.updated takes a change in place only while its terms' elimination-tree
-    paths read at most UPDATE_WORK_LIMIT times the factor's entries: a check that folds
-    many hinges at once brought thousands of terms whose updates took 327 ms where a new
-    factor takes 47 (squeeze, 65²). Every spring of a sheet reweighted at once is declined
-    (the caller then factors anew); a few of them are taken, and solve their system."""
-    from paper_sim_ros.core import projective
+def springs_step_pinned_on_one_edge():
+    """A 17 x 17 sheet's springs' global step (600 N/m), its first row pinned; the sheet,
+    the pins, the step and the springs between free vertices."""
     from paper_sim_ros.core.projective import GlobalStep, spring_entries
     sheet = build_flat_sheet(SheetConfig(nx=17, ny=17))
     pinned = np.zeros(sheet.vertex_count, dtype=bool)
@@ -838,7 +834,17 @@ def test_a_factor_update_dearer_than_a_new_factor_is_declined():
     weight = np.full(sheet.spring_count, 600.0)
     step = GlobalStep(sheet.vertex_mass, pinned, spring_entries(sheet.spring_vertices, weight),
                       1.0 / 60.0)
-    free_springs = np.flatnonzero(~pinned[sheet.spring_vertices].any(axis=1))
+    return sheet, pinned, step, np.flatnonzero(~pinned[sheet.spring_vertices].any(axis=1))
+
+
+def test_a_factor_update_dearer_than_a_new_factor_is_declined():
+    """GlobalStep.updated takes a change in place only while its terms' elimination-tree
+    paths read at most UPDATE_WORK_LIMIT times the factor's entries: a check that folds
+    many hinges at once brought thousands of terms whose updates took 327 ms where a new
+    factor takes 47 (squeeze, 65²). Every spring of a sheet reweighted at once is declined
+    (the caller then factors anew); a few of them are taken, and solve their system."""
+    from paper_sim_ros.core import projective
+    sheet, pinned, step, free_springs = springs_step_pinned_on_one_edge()
 
     def reweighted(springs):
         return (sheet.spring_vertices[springs].astype(np.int64),
@@ -859,6 +865,35 @@ def test_a_factor_update_dearer_than_a_new_factor_is_declined():
     few = step.updated(reweighted(free_springs[::97]), pinned)
     assert few is not None
     known = np.random.default_rng(0).normal(size=(sheet.vertex_count, 3))
+    known[pinned] = 0.0
+    solved = np.zeros_like(known)
+    few.solve(few.system @ known, solved)
+    np.testing.assert_allclose(solved, known, rtol=0, atol=1e-9)
+
+
+def test_a_change_that_cancels_out_is_not_declined_as_too_large():
+    """UpdatedStep.changed_by declines a change touching more than MAX_UPDATE_VERTICES
+    vertices before assembling the changed system (a yield of hundreds of patches at 65²
+    spent up to 41 ms on it). That early test counts only what surely stays touched: a
+    change whose terms cancel (every free spring reweighted, then back) is the same
+    system, taken as it is; one that does not cancel is declined; a small one is
+    answered, and solves its system."""
+    from paper_sim_ros.core import projective
+    from paper_sim_ros.core.projective import UpdatedStep, spring_entries
+    sheet, pinned, step, free_springs = springs_step_pinned_on_one_edge()
+
+    def reweighted(springs, change):
+        return spring_entries(sheet.spring_vertices[springs].astype(np.int64),
+                              np.full(springs.size, change))
+
+    there, back = reweighted(free_springs, 60.0), reweighted(free_springs, -60.0)
+    cancelling = tuple(np.concatenate([a, b]) for a, b in zip(there, back))
+    assert np.unique(cancelling[0]).size > 4 * projective.MAX_UPDATE_VERTICES
+    assert UpdatedStep.changed_by(step, cancelling, pinned) is step
+    assert UpdatedStep.changed_by(step, there, pinned) is None
+    few = UpdatedStep.changed_by(step, reweighted(free_springs[:5], 60.0), pinned)
+    assert isinstance(few, UpdatedStep)
+    known = np.random.default_rng(1).normal(size=(sheet.vertex_count, 3))
     known[pinned] = 0.0
     solved = np.zeros_like(known)
     few.solve(few.system @ known, solved)

@@ -389,6 +389,23 @@ CHANGE_TOLERANCE = 1e-12
 the same (the rounding of a different summation order)."""
 
 
+def _surely_touched(rows: np.ndarray, columns: np.ndarray, values: np.ndarray,
+                    previous: 'GlobalStep | UpdatedStep', count: int) -> int:
+    """How many vertices a change (rows, columns, values) surely touches beyond those an
+    UpdatedStep ``previous`` touched already: those whose diagonal entry it moves by
+    twice the tolerance (summed in any order, such a change stays beyond it). A lower
+    bound on what ``UpdatedStep.changed_by`` finds, at a fraction of its cost."""
+    on_diagonal = rows == columns
+    diagonal_change = np.bincount(rows[on_diagonal], weights=values[on_diagonal],
+                                  minlength=count)
+    tolerance = 2.0 * CHANGE_TOLERANCE * np.abs(previous.system.diagonal()
+                                                + diagonal_change).max()
+    beyond = np.abs(diagonal_change) > tolerance
+    if isinstance(previous, UpdatedStep):
+        beyond[previous._touched] = False
+    return int(np.count_nonzero(beyond))
+
+
 def global_step(vertex_mass: np.ndarray, pinned: np.ndarray,
                 stiffness: tuple[np.ndarray, np.ndarray, np.ndarray], h: float,
                 previous: 'GlobalStep | UpdatedStep | None' = None
@@ -463,6 +480,8 @@ class UpdatedStep:
                 or not np.array_equal(pinned, previous.pinned_mask):
             return None
         rows, columns, values = change
+        if _surely_touched(rows, columns, values, previous, count) > MAX_UPDATE_VERTICES:
+            return None  # a yield of hundreds of patches: not worth assembling it first
         system = (previous.system + sparse.coo_matrix(
             (values, (rows, columns)), shape=(count, count)).tocsr()).tocsr()
         # the change on T since the factor: the previous update's and this one's
