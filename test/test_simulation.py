@@ -457,11 +457,12 @@ def test_two_fingertips_moving_apart_the_weaker_grip_slips():
     assert np.all(np.sign(moved) == np.sign(moved[0])), 'the sheet goes with one of them'
 
 
-def _wide_pad_drag(frames: int) -> Simulator:
-    """``drag`` at 33² with a 4 cm pad: it grips some 85 vertices, 255 rows."""
+def _wide_pad_drag(frames: int, radius: float = 0.04) -> Simulator:
+    """``drag`` at 33² with a wide pad: a 4 cm one grips some 85 vertices, 255 rows; a 3 cm
+    one 47 vertices, 141 rows."""
     mapping = with_overrides(builtin_mapping('drag'), grid=33)
     mapping['damage'] = {'enabled': False}
-    mapping['probes'][0]['radius'] = 0.04
+    mapping['probes'][0]['radius'] = radius
     drag = scenario_from_mapping(mapping)
     simulator = build_simulator(drag)
     for frame in range(frames):
@@ -471,23 +472,28 @@ def _wide_pad_drag(frames: int) -> Simulator:
 
 
 @pytest.mark.parametrize('frames', [100, 170])
-def test_a_wide_pad_holds_its_grip_as_pins_of_the_factor(frames, monkeypatch):
-    """A pad that grips more than GRIP_ROWS_MOST rows' worth holds its footprint as pins of
-    the factored systems instead of as constraint rows (whose dense system costs the cube
-    of their count: a squeeze with 4 cm fingertips at 65² took over 300 s for 4 s), and
-    lets them go at lift-off. The answer is the rows' (measured: 3e-14 m apart while
-    dragging, 4e-13 m after lift-off)."""
-    as_pins = _wide_pad_drag(frames)
+@pytest.mark.parametrize('radius', [0.04, 0.03])
+def test_a_wide_pad_holds_its_grip_as_pins_of_the_factor(frames, radius, monkeypatch):
+    """A pad that grips more than GRIP_ROWS_MOST rows' worth (4 cm) holds its footprint as
+    pins of the factored systems instead of as constraint rows (whose dense system costs
+    the cube of their count: a squeeze with 4 cm fingertips at 65² took over 300 s for 4
+    s), and lets them go at lift-off. So does one whose grip has stood long enough to be
+    worth a factor (3 cm: GRIP_PIN_WORK). The answer is the rows' (measured: 3e-14 m apart
+    while dragging, 4e-13 m after lift-off)."""
+    as_pins = _wide_pad_drag(frames, radius)
     held = np.count_nonzero(as_pins._grip_pinned)
     if frames == 100:  # dragging
-        assert 3 * held > simulator_module.GRIP_ROWS_MOST, held
+        assert held == np.count_nonzero(as_pins._grip_probe >= 0)
+        assert (3 * held > simulator_module.GRIP_ROWS_MOST) == (radius == 0.04), held
+        assert held * as_pins.sheet.vertex_count >= simulator_module.GRIP_PIN_WORK
         assert as_pins._global_step.step.free.size \
             == as_pins.sheet.vertex_count - held - np.count_nonzero(as_pins.sheet.pinned)
     else:  # lifted off: the factor holds nothing the pad let go
         assert held == 0 and not np.any(as_pins._grip_probe >= 0)
         assert as_pins._global_step.step.free.size == as_pins.sheet.vertex_count
     monkeypatch.setattr(simulator_module, 'GRIP_ROWS_MOST', 10 ** 9)
-    as_rows = _wide_pad_drag(frames)
+    monkeypatch.setattr(simulator_module, 'GRIP_PIN_WORK', 10 ** 12)
+    as_rows = _wide_pad_drag(frames, radius)
     assert not np.any(as_rows._grip_pinned)
     np.testing.assert_allclose(as_pins.sheet.positions, as_rows.sheet.positions, rtol=0,
                                atol=1e-9)

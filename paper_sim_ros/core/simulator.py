@@ -73,6 +73,15 @@ GRIP_ROWS_MOST = 192
 gripped vertices are pins of the factored systems (Simulator._factor_grips). The rows' dense
 system costs the cube of their count whenever they change: a wide pad pressed flat onto a
 1 400-vertex sheet gripped all of it and took 30 s a frame."""
+GRIP_STANDING_SUBSTEPS = 6
+"""Sub-steps a set of gripped vertices must stand unchanged before it may become pins of
+the factored systems (GRIP_PIN_WORK): a new factor pays for itself only over many solves."""
+GRIP_PIN_WORK = 40_000
+"""Gripped vertices × the sheet's vertices from which standing grips are pins of the
+factored systems rather than rows of every solve (each row vertex costs a pass over the
+sheet a solve; a factorisation grows a little faster than the sheet): 10 gripped vertices
+at 65², 37 at 33², 3 at 129². The squeeze at 65² (about 21 gripped vertices for 2 s, 27
+solves a frame) ran 14 % faster, its figures within its seeds' spread (docs/contact.md)."""
 SPIN_NONE, SPIN_VERTICAL, SPIN_ALL = 0, 1, 2
 """Which angular momentum a sub-step keeps (Simulator._spin_kept): none, the vertical
 component, all of it."""
@@ -134,6 +143,10 @@ class Simulator:
         """The vertices the factored systems hold as pins because a probe grips them
         (_factor_grips): kept when the grips are let go, until the systems are factored
         without them."""
+        self._grips_seen = np.zeros(self.sheet.vertex_count, dtype=bool)
+        """The gripped vertices at the last _factor_grips, and for how many sub-steps they
+        have stood unchanged."""
+        self._grips_standing = 0
         self._table_reaction = np.zeros(self.sheet.vertex_count)
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
         self._rest_shape = self.sheet.positions.copy()
@@ -1272,13 +1285,22 @@ class Simulator:
         systems anew with the gripped vertices pinned (they are placed where their probe
         carries them before the solves, as pins are where they were), and again when one of
         them is let go: a wide pad holds its footprint for one factorisation per change of
-        its grip, not the cube of its rows per solve."""
+        its grip, not the cube of its rows per solve. So too grips that have stood
+        GRIP_STANDING_SUBSTEPS sub-steps, where their rows would cost more than a factor
+        (GRIP_PIN_WORK): a squeeze's fingertips hold the same vertices for seconds."""
         gripped = self._grip_probe >= 0
         pinned = self._grip_pinned
-        if not (np.any(pinned & ~gripped)
-                or 3 * np.count_nonzero(gripped & ~pinned) > GRIP_ROWS_MOST):
+        if np.array_equal(self._grips_seen, gripped):
+            self._grips_standing += 1
+        else:
+            self._grips_seen, self._grips_standing = gripped.copy(), 0
+        held = np.count_nonzero(gripped)
+        standing = self._grips_standing >= GRIP_STANDING_SUBSTEPS \
+            and held * gripped.size >= GRIP_PIN_WORK
+        rows = np.count_nonzero(gripped & ~pinned)
+        if not (np.any(pinned & ~gripped) or 3 * rows > GRIP_ROWS_MOST or (standing and rows)):
             return
-        self._grip_pinned = gripped if 3 * np.count_nonzero(gripped) > GRIP_ROWS_MOST \
+        self._grip_pinned = gripped.copy() if standing or 3 * held > GRIP_ROWS_MOST \
             else np.zeros_like(gripped)
         self._factor_global_steps()
 
