@@ -9,8 +9,11 @@ Fig. 12–13 in numbers.
 
 cost: the built-in 'squeeze' stepped with damage on and off; ms per frame for the whole
 step, and the part spent in damage (the check, the mesh surgery and the solver's rebuild
-after a change); mesh changes, and the rebuild's ms per change (factor updates and the
-refactors they pay for, or a refactor each change). fragility: squeeze breaks and folds
+after a change); mesh changes (breaks, folds), and the rebuild's ms per change (factor
+updates and the refactors they pay for, or a refactor each change); the factors' changes
+outside them (patches that yield, taken in place or factored anew; a factor renewed once
+its updates have cost one), and their ms each.
+fragility: squeeze breaks and folds
 per φ. psi: the 'crumple' scenario with breaks only (no folds), mean ridge height of the
 creases and the relaxed deviation per ψ. substeps: squeeze breaks, folds, the plastic set
 (hinges whose rest shape is bent) and relaxed deviation at 1, 2 and 4 sub-steps. drift: the
@@ -37,16 +40,22 @@ from paper_sim_ros.core.scenarios import (builtin_mapping, scenario_from_mapping
 
 
 def run(name: str, grid: int, damage: dict, substeps: int = 1, seed: int = 0):
-    """Step a built-in scenario; returns the simulator and the seconds spent (total, damage)."""
+    """Step a built-in scenario; returns the simulator, its frames and the seconds spent
+    (``spent``: 'total'; 'damage', the checks, the mesh surgery and every rebuild they
+    cause; 'rebuild' and 'changes', the rebuilds after a break or fold and how many;
+    'refactor' and 'refactors', the factors' changes outside them: patches that yield, or
+    a factor renewed once its updates have cost one; a grip pinned in the factors is not
+    damage's)."""
     mapping = with_overrides(builtin_mapping(name), grid=grid, substeps=substeps, seed=seed)
     mapping['damage'] = damage
     scenario = scenario_from_mapping(mapping)
     simulator = build_simulator(scenario)
-    spent = {'damage': 0.0, 'rebuild': 0.0, 'changes': 0, 'depth': 0}
+    spent = {'damage': 0.0, 'rebuild': 0.0, 'changes': 0, 'refactor': 0.0, 'refactors': 0,
+             'depth': 0}
     advance, rebuild = simulator.damage.advance, simulator.topology_changed
-    factor = simulator._factor_global_steps
+    factor, grips = simulator._factor_global_steps, simulator._factor_grips
 
-    def timed(function, *keys):
+    def timed(function, *keys, count=None):
         def wrapper(*args, **kwargs):
             spent['depth'] += 1
             started = time.perf_counter()
@@ -57,32 +66,28 @@ def run(name: str, grid: int, damage: dict, substeps: int = 1, seed: int = 0):
                 if spent['depth'] == 0:  # a refactor inside a rebuild counts once
                     for key in keys:
                         spent[key] += time.perf_counter() - started
-        return wrapper
-
-    def counted(function):
-        def wrapper(*args, **kwargs):
-            spent['changes'] += 1
-            return function(*args, **kwargs)
+                    if count:
+                        spent[count] += 1
         return wrapper
 
     simulator.damage.advance = timed(advance, 'damage')
-    simulator.topology_changed = counted(timed(rebuild, 'damage', 'rebuild'))
-    # the factors renewed once their updates have cost as much (projective.UpdatedStep)
-    simulator._factor_global_steps = timed(factor, 'damage', 'rebuild')
+    simulator.topology_changed = timed(rebuild, 'damage', 'rebuild', count='changes')
+    simulator._factor_global_steps = timed(factor, 'damage', 'refactor', count='refactors')
+    simulator._factor_grips = timed(grips)  # its refactors are the grips', not damage's
     dt = scenario.config.solver.dt
     started = time.perf_counter()
     for frame in range(scenario.frame_count):
         simulator.set_probes(*scenario.probe_inputs((frame + 1) * dt))
         simulator.step_frame()
-    return (simulator, scenario.frame_count, time.perf_counter() - started, spent['damage'],
-            spent['changes'], spent['rebuild'])
+    spent['total'] = time.perf_counter() - started
+    return simulator, scenario.frame_count, spent
 
 
 def cost(grids: list[int]) -> None:
     run('squeeze', 17, {})  # warm-up: numba compilation
     print('| grid | damage | ms/frame | of which damage | mesh changes | ms per change '
-          '| breaks | folds | vertices |')
-    print('|---|---|---|---|---|---|---|---|---|')
+          '| other refactors | ms each | breaks | folds | vertices |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
     update_limit, in_place = projective.MAX_UPDATE_VERTICES, projective.GlobalStep.updated
     for grid in grids:
         for enabled, updates in ((False, True), (True, True), (True, False)):
@@ -90,13 +95,14 @@ def cost(grids: list[int]) -> None:
             # systems afresh
             projective.MAX_UPDATE_VERTICES = update_limit if updates else 0
             projective.GlobalStep.updated = in_place if updates else lambda *args: None
-            simulator, frames, total, damage, changes, rebuilt = run(
-                'squeeze', grid, {'enabled': enabled})
+            simulator, frames, spent = run('squeeze', grid, {'enabled': enabled})
             label = 'on' if updates else 'on, refactor each change'
-            print(f'| {grid} | {label if enabled else "off"} | {1e3 * total / frames:.2f} '
-                  f'| {1e3 * damage / frames:.2f} | {changes} '
-                  f'| {1e3 * rebuilt / max(changes, 1):.1f} | {simulator.breaks} '
-                  f'| {simulator.folds} | {simulator.sheet.vertex_count} |')
+            print(f'| {grid} | {label if enabled else "off"} '
+                  f'| {1e3 * spent["total"] / frames:.2f} | {1e3 * spent["damage"] / frames:.2f} '
+                  f'| {spent["changes"]} | {1e3 * spent["rebuild"] / max(spent["changes"], 1):.1f} '
+                  f'| {spent["refactors"]} '
+                  f'| {1e3 * spent["refactor"] / max(spent["refactors"], 1):.1f} '
+                  f'| {simulator.breaks} | {simulator.folds} | {simulator.sheet.vertex_count} |')
     projective.MAX_UPDATE_VERTICES, projective.GlobalStep.updated = update_limit, in_place
 
 
