@@ -44,6 +44,15 @@ FLAT_REST = 1e-9
 """Hinges whose rest |κ0| is below this [rad] rest flat: their target is zero and skipped
 (the whole sheet, until it is aged or damaged)."""
 
+CREASE_STIFFNESS_SHARE = 0.1
+"""Share of the sheet's bending stiffness left to a hinge damage created: stiffer creases
+set off a cascade of folds around them (measured in docs/solver.md)."""
+
+MAX_SHAPE_RATIO = 4.0
+"""|e|² / (A_r + A_l) is capped here, and heights are floored at a quarter of the edge: a
+sliver hinge left by damage does not get a stiffness out of proportion. A grid hinge has
+1 (along an axis) or 2 (a diagonal)."""
+
 
 def beyond_flat(rest: np.ndarray, flat: float = FLAT_REST) -> np.ndarray:
     """(N,) bool: the rows of ``rest`` (N, K) with a component beyond ``flat`` in
@@ -53,16 +62,6 @@ def beyond_flat(rest: np.ndarray, flat: float = FLAT_REST) -> np.ndarray:
     for column in range(rest.shape[1]):
         bent |= np.abs(rest[:, column]) > flat
     return bent
-
-
-CREASE_STIFFNESS_SHARE = 0.1
-"""Share of the sheet's bending stiffness left to a hinge damage created: stiffer creases
-set off a cascade of folds around them (measured in docs/solver.md)."""
-
-MAX_SHAPE_RATIO = 4.0
-"""|e|² / (A_r + A_l) is capped here, and heights are floored at a quarter of the edge: a
-sliver hinge left by damage does not get a stiffness out of proportion. A grid hinge has
-1 (along an axis) or 2 (a diagonal)."""
 
 
 def hinge_quads(triangles: np.ndarray, vertex_count: int) -> np.ndarray:

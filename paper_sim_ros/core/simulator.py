@@ -81,7 +81,8 @@ GRIP_PIN_WORK = 40_000
 factored systems rather than rows of every solve (each row vertex costs a pass over the
 sheet a solve; a factorisation grows a little faster than the sheet): 10 gripped vertices
 at 65², 37 at 33², 3 at 129². The squeeze at 65² (about 21 gripped vertices for 2 s, 27
-solves a frame) ran 14 % faster, its figures within its seeds' spread (docs/contact.md)."""
+solves a frame) took 27.8-30.4 ms a frame against 32.4-36.8, its figures within its seeds'
+spread (docs/contact.md)."""
 SPIN_NONE, SPIN_VERTICAL, SPIN_ALL = 0, 1, 2
 """Which angular momentum a sub-step keeps (Simulator._spin_kept): none, the vertical
 component, all of it."""
