@@ -1301,7 +1301,7 @@ class Simulator:
         rows = np.count_nonzero(gripped & ~pinned)
         if not (np.any(pinned & ~gripped) or 3 * rows > GRIP_ROWS_MOST or (standing and rows)):
             return
-        self._grip_pinned = gripped.copy() if standing or 3 * held > GRIP_ROWS_MOST \
+        self._grip_pinned = gripped if standing or 3 * held > GRIP_ROWS_MOST \
             else np.zeros_like(gripped)
         self._factor_global_steps()
 
