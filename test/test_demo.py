@@ -39,7 +39,7 @@ def test_probe_path_refuses_bad_values():
 @pytest.mark.slow
 def test_demo_runs_and_says_where_its_recording_is(tmp_path):
     result = subprocess.run(
-        [PYTHON, '-m', 'paper_sim_ros.demo', '--duration', '4', '--grid', '9',
+        [PYTHON, '-m', 'paper_sim_ros.demo', '--duration', '8', '--grid', '9',
          '--out', str(tmp_path / 'out')],
         env=ros_env(new_domain_id()), cwd=str(REPO), capture_output=True, text=True,
         timeout=120)
@@ -53,4 +53,8 @@ def test_demo_runs_and_says_where_its_recording_is(tmp_path):
     assert strains, result.stdout[-2000:]
     last_second, run = (float(value) for value in strains.groups())
     assert 0.0 < last_second <= run, f'last second {last_second} %, run {run} %'
+    # the scripted probe runs as a process of its own: its poses reached the node over DDS
+    # (it is away for its first 2 s, then publishes at 60 Hz)
+    poses = re.search(r'(\d+) probe poses', result.stdout)
+    assert poses and int(poses.group(1)) > 0, result.stdout[-2000:]
     assert 'Traceback' not in result.stderr
