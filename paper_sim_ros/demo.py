@@ -1,6 +1,6 @@
 """`make demo`: the paper_sim node and the scripted probe together for a fixed time.
 
-    python -m paper_sim_ros.demo [--duration 20] [--out out] [--grid 33]
+    python -m paper_sim_ros.demo [--duration 20] [--out out] [--grid 33] [--report-every 60]
 
 The node runs in this process and the scripted probe in a child process, as a robot's
 driver would: the probe publishes its poses at its own rate also while the simulation steps
@@ -23,6 +23,7 @@ of slipping (which shares the path the simulation could not follow out over fewe
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 import subprocess
@@ -61,11 +62,16 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
                         help='the simulation publishes /clock and the probe follows it')
     parser.add_argument('--camera-rate', type=float, default=10.0,
                         help='the virtual camera (paper/camera/...) [Hz] (default 10; 0: off)')
+    parser.add_argument('--report-every', type=float, default=0.0, metavar='SECONDS',
+                        help='print the real-time factor over each such interval, the '
+                        'vertices and the memory (default 0: only the summary at the end)')
     arguments = parser.parse_args(argv)
     if not (arguments.duration > 0):
         parser.error('--duration must be > 0')
     if not (0 <= arguments.camera_rate <= 1000):
         parser.error('--camera-rate must be in [0, 1000] Hz')
+    if not (0 <= arguments.report_every < math.inf):
+        parser.error('--report-every must be >= 0 s')
     return arguments
 
 
@@ -101,8 +107,10 @@ def main(argv: list[str] | None = None) -> int:
               f'/paper/camera/... /diagnostics', flush=True)
         started = time.monotonic()
         end = started + arguments.duration
+        report = _Report(simulation, started, arguments.report_every)
         while time.monotonic() < end and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)
+            report.due(time.monotonic())
     except (KeyboardInterrupt, ExternalShutdownException):
         interrupted = True
     except StartupError as error:
@@ -143,6 +151,39 @@ def _stop_probe(probe: subprocess.Popen) -> None:
     except subprocess.TimeoutExpired:
         probe.kill()
         probe.wait()
+
+
+class _Report:
+    """``--report-every``: a line per interval of wall-clock time, for long runs (does the
+    node keep up, does the sheet stay under ``max_vertices``, does the memory stay flat)."""
+
+    def __init__(self, simulation: PaperSimNode, started: float, interval: float) -> None:
+        self._simulation = simulation
+        self._interval = interval
+        self._since, self._simulated = started, simulation.simulator.time
+
+    def due(self, now: float) -> None:
+        if self._interval <= 0.0 or now - self._since < self._interval:
+            return
+        simulator = self._simulation.simulator
+        factor = (simulator.time - self._simulated) / (now - self._since)
+        print(f'paper_sim demo: {factor:.2f}× real time over the last {now - self._since:.0f} s'
+              f' ({simulator.time:.1f} s simulated), {simulator.sheet.vertex_count} vertices, '
+              f'breaks {simulator.breaks}, folds {simulator.folds}, '
+              f'RSS {_resident_megabytes()}', flush=True)
+        self._since, self._simulated = now, simulator.time
+
+
+def _resident_megabytes() -> str:
+    """The process's resident memory now (Linux's /proc), e.g. '372 MB'; '?' elsewhere."""
+    try:
+        with open('/proc/self/status') as status:
+            for line in status:
+                if line.startswith('VmRSS:'):
+                    return f'{int(line.split()[1]) / 1024:.0f} MB'
+    except OSError:
+        pass
+    return '?'
 
 
 def _summary(simulation: PaperSimNode, wall_seconds: float) -> str:

@@ -40,7 +40,7 @@ def test_probe_path_refuses_bad_values():
 def test_demo_runs_and_says_where_its_recording_is(tmp_path):
     result = subprocess.run(
         [PYTHON, '-m', 'paper_sim_ros.demo', '--duration', '8', '--grid', '9',
-         '--out', str(tmp_path / 'out')],
+         '--out', str(tmp_path / 'out'), '--report-every', '3'],
         env=ros_env(new_domain_id()), cwd=str(REPO), capture_output=True, text=True,
         timeout=120)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
@@ -57,4 +57,12 @@ def test_demo_runs_and_says_where_its_recording_is(tmp_path):
     # (it is away for its first 2 s, then publishes at 60 Hz)
     poses = re.search(r'(\d+) probe poses', result.stdout)
     assert poses and int(poses.group(1)) > 0, result.stdout[-2000:]
+    # --report-every: a line per interval, each with the factor, the vertices and the memory
+    reports = re.findall(r'([0-9.]+)× real time over the last (\d+) s \(([0-9.]+) s simulated\),'
+                         r' (\d+) vertices, breaks \d+, folds \d+, RSS (\d+) MB', result.stdout)
+    assert len(reports) == 2, result.stdout[-2000:]
+    for factor, interval, simulated, vertices, resident in reports:
+        assert float(factor) > 0.0 and int(interval) >= 3 and int(vertices) == 81
+        assert 50 < int(resident) < 4000
+    assert float(reports[0][2]) < float(reports[1][2])
     assert 'Traceback' not in result.stderr
