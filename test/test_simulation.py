@@ -280,28 +280,71 @@ def test_a_fingertip_lifting_off_an_arch_it_pushed_up_does_not_wrap_the_paper_ro
     assert simulator.max_probe_penetration() < 1e-3
 
 
-def test_deep_in_probes_names_the_probe_each_deep_vertex_is_deepest_in():
-    """The kernel behind a rising probe's rows (``Simulator._deep_in_rising_probes``)
-    against its definition in numpy: a vertex nearer than (1 - share) of a listed probe's
-    radius to its centre gets the listed probe whose surface it is deepest below (the
-    first of equals), an excluded vertex or one not that deep -1."""
+def test_settled_contact_rows_against_their_definition_in_numpy():
+    """The kernel that redoes a solve's probe rows (``Simulator._settle_contact_rows``)
+    against its definition in numpy. It keeps the grips' rows and the contact rows that
+    push (λ ≤ 0), drops those that pull. It adds a row on the nearest active probe's
+    surface for each free vertex without one deeper than the tolerance inside a free probe.
+    Then one for each other free, ungripped vertex nearer than (1 - share) of a rising
+    probe's radius to its centre: on the probe whose surface it is deepest below (the
+    first of equals), on the side it started from. The added vertices' table reaction is
+    zeroed."""
     rng = np.random.default_rng(3)
     positions = rng.uniform(-0.015, 0.025, (2000, 3))
     positions[:4] = [[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.005, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    start = positions + rng.normal(0.0, 0.003, positions.shape)
     centers = np.array([[0.0, 0.0, 0.0], [0.01, 0.0, 0.0], [0.02, 0.02, 0.0]])
+    centers_from = centers - [0.0, 0.0, 0.004]
     radii = np.array([0.012, 0.012, 0.01])
-    probes = np.array([0, 1])  # the third probe is not rising
-    excluded = np.zeros(len(positions), dtype=bool)
-    excluded[3] = True
-    deep_in = np.empty(len(positions), dtype=np.int64)
-    kernels.deep_in_probes(positions, centers, radii, probes, 0.5, excluded, deep_in)
-    distance = np.linalg.norm(positions[:, None, :] - centers[None, probes], axis=2)
-    deep = np.any(distance < 0.5 * radii[None, probes], axis=1) & ~excluded
-    expected = np.full(len(positions), -1)
-    expected[deep] = probes[np.argmin(distance[deep] - radii[None, probes], axis=1)]
-    np.testing.assert_array_equal(deep_in, expected)
-    assert list(deep_in[:4]) == [0, 1, 0, -1]  # the third: equally deep in both
-    assert np.count_nonzero(deep_in == 0) > 5 and np.count_nonzero(deep_in == 1) > 5
+    active = np.ones(3, dtype=bool)
+    free_probes = np.array([False, False, True])
+    rising = np.array([0, 1])  # the third probe is free, not rising
+    pinned = np.zeros(len(positions), dtype=bool)
+    pinned[3] = True
+    gripped = np.zeros(len(positions), dtype=bool)
+    gripped[5:25] = True
+    # rows as a solve left them: a grip's three, a contact row that pushes, one that pulls
+    row_vertex = np.array([5, 5, 5, 30, 31])
+    row_direction = np.vstack([np.eye(3), [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    row_value = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
+    row_is_contact = np.array([False, False, False, True, True])
+    multipliers = np.array([5.0, -5.0, 1.0, -2.0, 3.0])
+    reaction = np.ones(len(positions))
+    vertex, direction, value, is_contact = kernels.settled_contact_rows(
+        positions, start, centers_from, centers, radii, active, free_probes, rising, -1.0,
+        False, 1e-5, 0.5, pinned, gripped, row_vertex, row_direction, row_value,
+        row_is_contact, multipliers, reaction)
+
+    kept = [0, 1, 2, 3]  # the pulling contact row (λ > 0) is let go
+    excluded = pinned.copy()
+    excluded[row_vertex] = True
+    distance = np.linalg.norm(positions[:, None, :] - centers[None], axis=2)
+    near = np.flatnonzero((radii[2] - distance[:, 2] > 1e-5) & ~excluded)
+    deep_mask = np.any(distance[:, rising] < 0.5 * radii[None, rising], axis=1) \
+        & ~excluded & ~gripped
+    deep_mask[near] = False
+    deep = np.flatnonzero(deep_mask)
+    deepest = rising[np.argmin(distance[deep][:, rising] - radii[None, rising], axis=1)]
+    np.testing.assert_array_equal(vertex, np.concatenate([row_vertex[kept], near, deep]))
+    np.testing.assert_array_equal(is_contact, [False] * 3 + [True] * (1 + near.size + deep.size))
+    np.testing.assert_array_equal(direction[:4], row_direction[kept])
+    np.testing.assert_array_equal(value[:4], row_value[kept])
+    near_normal = positions[near] - centers[2]
+    near_normal /= np.linalg.norm(near_normal, axis=1)[:, None]
+    deep_normal = start[deep] - centers_from[deepest]
+    deep_normal /= np.linalg.norm(deep_normal, axis=1)[:, None]
+    normal = np.vstack([near_normal, deep_normal])
+    surface = np.vstack([centers[2] + radii[2] * near_normal,
+                         centers[deepest] + radii[deepest, None] * deep_normal])
+    np.testing.assert_allclose(direction[4:], normal, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(value[4:], np.einsum('va,va->v', normal, surface), rtol=0,
+                               atol=1e-15)
+    assert near.size > 20 and np.count_nonzero(deepest == 0) > 5 \
+        and np.count_nonzero(deepest == 1) > 5
+    # the third is as deep in both rising probes: the first of them
+    assert list(deep[:3]) == [0, 1, 2] and list(deepest[:3]) == [0, 1, 0]
+    assert np.all(reaction[vertex[4:]] == 0.0)
+    assert np.count_nonzero(reaction == 0.0) == near.size + deep.size
 
 
 @pytest.mark.parametrize('radius', [0.005, 0.003])

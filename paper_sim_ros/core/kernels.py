@@ -775,16 +775,6 @@ def _deepest_probe(positions, v, probe_center, probe_radius, probes, depth_share
 
 
 @njit(cache=True)
-def deep_in_probes(positions, probe_center, probe_radius, probes, depth_share, excluded,
-                   deep_in):
-    """``deep_in``: for each vertex not ``excluded``, ``_deepest_probe`` of ``probes``; -1
-    for the excluded."""
-    for v in range(positions.shape[0]):
-        deep_in[v] = -1 if excluded[v] else _deepest_probe(
-            positions, v, probe_center, probe_radius, probes, depth_share)
-
-
-@njit(cache=True)
 def contact_rows_hold(positions, probe_center, probe_radius, probe_active, ground_height,
                       ground_enabled, tolerance, pinned, row_vertex, row_is_contact,
                       multipliers, rising, depth_share, gripped):
@@ -810,6 +800,139 @@ def contact_rows_hold(positions, probe_center, probe_radius, probe_active, groun
                                              rising, depth_share) >= 0:
             return False
     return True
+
+
+@njit(cache=True, inline='always')
+def _sphere_plane(points, i, origin, o, center, c, radius, normal, surface, k):
+    """Where the ray from ``origin[o]`` through ``points[i]`` leaves the sphere of
+    ``radius`` round ``center[c]``, had they the same centre: the ray's unit direction into
+    ``normal[k]`` (the sphere's normal there) and ``center[c]`` + radius · normal into
+    ``surface[k]``."""
+    length = 0.0
+    for a in range(3):
+        normal[k, a] = points[i, a] - origin[o, a]
+        length += normal[k, a] * normal[k, a]
+    length = max(np.sqrt(length), EPSILON_LENGTH)
+    for a in range(3):
+        normal[k, a] /= length
+        surface[k, a] = center[c, a] + radius * normal[k, a]
+
+
+@njit(cache=True, inline='always')
+def _contact_plane(positions, v, probe_center, probe_radius, probe_active, ground_height,
+                   ground_enabled, normal, surface, k):
+    """Where vertex v touches the nearest active probe (the first of equals): the unit
+    normal out of it into ``normal[k]``, the surface point nearest v into ``surface[k]``;
+    under a probe pressed into the table, its flattened pad's face (the table plane,
+    facing down)."""
+    nearest = 0
+    smallest = np.inf
+    for p in range(probe_radius.shape[0]):
+        if not probe_active[p]:
+            continue
+        dx = positions[v, 0] - probe_center[p, 0]
+        dy = positions[v, 1] - probe_center[p, 1]
+        dz = positions[v, 2] - probe_center[p, 2]
+        gap = np.sqrt(dx * dx + dy * dy + dz * dz) - probe_radius[p]
+        if gap < smallest:
+            smallest = gap
+            nearest = p
+    _sphere_plane(positions, v, probe_center, nearest, probe_center, nearest,
+                  probe_radius[nearest], normal, surface, k)
+    if ground_enabled and surface[k, 2] < ground_height:
+        normal[k, 0] = 0.0
+        normal[k, 1] = 0.0
+        normal[k, 2] = -1.0
+        surface[k, 0] = positions[v, 0]
+        surface[k, 1] = positions[v, 1]
+        surface[k, 2] = ground_height
+
+
+@njit(cache=True)
+def contact_planes(positions, vertices, probe_center, probe_radius, probe_active,
+                   ground_height, ground_enabled, normal, surface):
+    """``_contact_plane`` of each of ``vertices`` into the rows of ``normal``, ``surface``."""
+    for k in range(vertices.shape[0]):
+        _contact_plane(positions, vertices[k], probe_center, probe_radius, probe_active,
+                       ground_height, ground_enabled, normal, surface, k)
+
+
+@njit(cache=True)
+def settled_contact_rows(positions, start_positions, probe_from, probe_to, probe_radius,
+                         probe_active, free_probes, rising, ground_height, ground_enabled,
+                         tolerance, depth_share, pinned, gripped, row_vertex, row_direction,
+                         row_value, row_is_contact, multipliers, table_reaction):
+    """The probe rows of the next solve, where ``contact_rows_hold`` found that the last
+    one's do not stand (Simulator._settle_contact_rows): the grips' rows and the contact
+    rows that push (λ ≤ 0) as they were; then, in vertex order, a row for each free vertex
+    without one deeper than ``tolerance`` inside one of the ``free_probes`` (on the
+    nearest active probe's surface, ``_contact_plane``); then, in vertex order, one for
+    each other free, ungripped vertex deep in one of the ``rising`` probes
+    (``_deepest_probe``), on that probe's surface on the side the vertex came from (its
+    start position against the probe's start centre, moved with it: from near its centre
+    the way out is no way back). The added vertices' table reaction is zeroed. Returns
+    (vertex, direction, value, is_contact)."""
+    vertex_count = positions.shape[0]
+    has_row = np.zeros(vertex_count, dtype=np.bool_)
+    for r in range(row_vertex.shape[0]):
+        has_row[row_vertex[r]] = True
+    any_free = False
+    for p in range(free_probes.shape[0]):
+        any_free = any_free or free_probes[p]
+    # 1: inside a free probe, 2: deep in a rising one (``deep_probe``)
+    added = np.zeros(vertex_count, dtype=np.int8)
+    deep_probe = np.full(vertex_count, -1, dtype=np.int64)
+    near_count = 0
+    deep_count = 0
+    for v in range(vertex_count):
+        if pinned[v] or has_row[v]:
+            continue
+        if any_free and _probe_depth(positions, v, probe_to, probe_radius, free_probes,
+                                     ground_height, ground_enabled) > tolerance:
+            added[v] = 1
+            near_count += 1
+        elif not gripped[v]:
+            deep_probe[v] = _deepest_probe(positions, v, probe_to, probe_radius, rising,
+                                           depth_share)
+            if deep_probe[v] >= 0:
+                added[v] = 2
+                deep_count += 1
+    kept = 0
+    for r in range(row_vertex.shape[0]):
+        if not row_is_contact[r] or multipliers[r] <= 0.0:
+            kept += 1
+    count = kept + near_count + deep_count
+    vertex = np.empty(count, dtype=np.int64)
+    direction = np.empty((count, 3))
+    value = np.empty(count)
+    is_contact = np.ones(count, dtype=np.bool_)
+    k = 0
+    for r in range(row_vertex.shape[0]):
+        if not row_is_contact[r] or multipliers[r] <= 0.0:
+            vertex[k] = row_vertex[r]
+            for a in range(3):
+                direction[k, a] = row_direction[r, a]
+            value[k] = row_value[r]
+            is_contact[k] = row_is_contact[r]
+            k += 1
+    surface = np.empty((count, 3))
+    for kind in (1, 2):
+        for v in range(vertex_count):
+            if added[v] != kind:
+                continue
+            vertex[k] = v
+            table_reaction[v] = 0.0
+            if kind == 1:
+                _contact_plane(positions, v, probe_to, probe_radius, probe_active,
+                               ground_height, ground_enabled, direction, surface, k)
+            else:
+                p = deep_probe[v]
+                _sphere_plane(start_positions, v, probe_from, p, probe_to, p, probe_radius[p],
+                              direction, surface, k)
+            value[k] = (direction[k, 0] * surface[k, 0] + direction[k, 1] * surface[k, 1]
+                        + direction[k, 2] * surface[k, 2])
+            k += 1
+    return vertex, direction, value, is_contact
 
 
 @njit(cache=True, inline='always')

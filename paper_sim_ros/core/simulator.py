@@ -30,7 +30,6 @@ from .config import SimulationConfig
 from .bending import SheetBending
 from .damage import DamageModel
 from .probes import Probes
-from .kernels import EPSILON_LENGTH
 from .length_projection import project_lengths
 from .membrane import Membrane, membrane_weights
 from .mesh_editing import spring_lengths
@@ -992,9 +991,14 @@ class Simulator:
         """Contact only pushes: a contact row that pulls its vertex towards the probe is let
         go (the grips' rows, three to a vertex, hold). And a vertex the solve carried into a
         probe without a row gets one: left to the stretch pass, it would be pushed out
-        alone, denting the sheet around the probe and stretching it. So does a vertex a
-        solve carries deep into a rising probe (``_deep_in_rising_probes``). Returns whether
-        the rows changed (the solve must run again)."""
+        alone, denting the sheet around the probe and stretching it. So does a free vertex
+        a solve carries nearer than DEEP_IN_RISING_PROBE of its radius to the centre of a
+        rising probe: at a squeeze's lift-off the released paper springs out under the
+        rising fingertips, a solve that does not see them carried it 12-16 mm into one in a
+        sub-step, to within a few millimetres of its centre, and pushed out from there after
+        the solve it was torn across the fingertip (65², seed 0: 343 %). Both in one pass
+        (``kernels.settled_contact_rows``). Returns whether the rows changed (the solve must
+        run again)."""
         if not self.probes.count:
             return False
         vertex, direction, value = self._rows
@@ -1005,24 +1009,13 @@ class Simulator:
                 self.sheet.pinned, vertex, self._contact_row, multipliers,
                 self._rising_indices, DEEP_IN_RISING_PROBE, self._gripped):
             return False
-        deep_in = self._deep_in_rising_probes(positions)
-        deep_in[vertex] = -1
-        keep = ~self._contact_row | (multipliers <= 0.0)
-        inside = self._inside_probes(positions)
-        inside[vertex] = False
-        deep_in[inside] = -1
-        near, deep = np.flatnonzero(inside), np.flatnonzero(deep_in >= 0)
-        normal, surface = self._contact_planes(positions, near, self._probe_to)
-        deep_normal, deep_surface = self._rising_contact_planes(deep, deep_in[deep])
-        added = np.concatenate([near, deep])
-        normal = np.concatenate([normal, deep_normal])
-        surface = np.concatenate([surface, deep_surface])
-        self._rows = (np.concatenate([vertex[keep], added]),
-                      np.concatenate([direction[keep], normal]),
-                      np.concatenate([value[keep], np.einsum('va,va->v', normal, surface)]))
-        self._contact_row = np.concatenate([self._contact_row[keep],
-                                            np.ones(added.size, dtype=bool)])
-        self._table_reaction[added] = 0.0
+        row_vertex, row_direction, row_value, self._contact_row = kernels.settled_contact_rows(
+            positions, self._start_positions, self._probe_from, self._probe_to,
+            self.probes.radius, self.probes.active, self._free_probes, self._rising_indices,
+            contact.ground_height, contact.ground_enabled, CONTACT_TOLERANCE,
+            DEEP_IN_RISING_PROBE, self.sheet.pinned, self._gripped, vertex, direction, value,
+            self._contact_row, multipliers, self._table_reaction)
+        self._rows = (row_vertex, row_direction, row_value)
         return True
 
     def _set_contact_rows(self, positions, probe_from, probe_to, start_positions) -> None:
@@ -1039,7 +1032,7 @@ class Simulator:
             self._rows, self._contact_row = NO_ROWS, np.zeros(0, dtype=bool)
             self._lifting_off = np.zeros(0, dtype=bool)
             return
-        # the probes that hold what they reach in this sub-step's solves (_inside_probes):
+        # the probes that hold what they reach in this sub-step's solves (_settle_contact_rows):
         # a probe pressed into the table pinches what it reaches there (_grip), and the
         # stretch pass lets the sheet ahead of it buckle (docs/contact.md); a probe rising
         # lets go of what rode up its front: neither holds more rows
@@ -1075,64 +1068,16 @@ class Simulator:
         self._table_reaction[vertex] = 0.0
         self._rows = (vertex, direction, value)
 
-    def _inside_probes(self, positions) -> np.ndarray:
-        """(V,) bool: the free vertices deeper than CONTACT_TOLERANCE inside an active probe
-        that does not press into the table, at the end of the sub-step."""
-        inside = np.zeros(positions.shape[0], dtype=bool)
-        contact = self.config.contact
-        free_probes = self._free_probes
-        if np.any(free_probes):
-            kernels.inside_probes(positions, self._probe_to, self.probes.radius,
-                                  free_probes, contact.ground_height,
-                                  contact.ground_enabled, CONTACT_TOLERANCE, inside)
-            inside[self.sheet.pinned] = False
-        return inside
-
-    def _deep_in_rising_probes(self, positions) -> np.ndarray:
-        """(V,) int: for each free vertex deeper than DEEP_IN_RISING_PROBE of its radius
-        inside a rising probe, the rising probe it is deepest in; -1 elsewhere. At a
-        squeeze's lift-off the released paper springs out under the rising fingertips: a
-        solve that does not see them carried it 12-16 mm into one in a sub-step, to within
-        a few millimetres of its centre, and pushed out from there after the solve it was
-        torn across the fingertip (65², seed 0: 343 %)."""
-        deep_in = np.full(positions.shape[0], -1)
-        rising = self._rising_indices
-        if rising.size:
-            kernels.deep_in_probes(positions, self._probe_to, self.probes.radius, rising,
-                                   DEEP_IN_RISING_PROBE,
-                                   self.sheet.pinned | (self._grip_probe >= 0), deep_in)
-        return deep_in
-
-    def _rising_contact_planes(self, vertices, probe):
-        """Where ``vertices`` deep in the rising probes ``probe`` touch them: each probe's
-        surface on the side its vertex came from (its start position relative to the
-        probe's start centre), moved with it, and the unit normals out of it there. From
-        where they are, near its centre, the way out is no way back."""
-        normal = self._start_positions[vertices] - self._probe_from[probe]
-        normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
-        return normal, self._probe_to[probe] + self.probes.radius[probe, None] * normal
-
     def _contact_planes(self, positions, vertices, probe_to):
         """Where ``vertices`` touch the nearest active probe: the unit normals out of it and
         the surface points nearest them; under a probe pressed into the table, its
-        flattened pad's face (the table plane, facing down)."""
-        normal = np.zeros((vertices.size, 3))
-        if vertices.size == 0:
-            return normal, normal.copy()
-        radius = self.probes.radius
-        offset = positions[vertices, None, :] - probe_to[None, :, :]
-        gap = np.linalg.norm(offset, axis=2) - radius[None, :]
-        gap[:, ~self.probes.active] = np.inf
-        nearest = np.argmin(gap, axis=1)
-        normal = offset[np.arange(vertices.size), nearest]
-        normal /= np.maximum(np.linalg.norm(normal, axis=1), EPSILON_LENGTH)[:, None]
-        surface = probe_to[nearest] + radius[nearest, None] * normal
+        flattened pad's face (the table plane, facing down; ``kernels.contact_planes``)."""
+        normal = np.empty((vertices.size, 3))
+        surface = np.empty((vertices.size, 3))
         table = self.config.contact
-        if table.ground_enabled:
-            pinched = surface[:, 2] < table.ground_height
-            normal[pinched] = (0.0, 0.0, -1.0)
-            surface[pinched, :2] = positions[vertices[pinched], :2]
-            surface[pinched, 2] = table.ground_height
+        kernels.contact_planes(positions, vertices, probe_to, self.probes.radius,
+                               self.probes.active, table.ground_height, table.ground_enabled,
+                               normal, surface)
         return normal, surface
 
     def _limit_strain(self, positions, start_positions, probe_from, probe_to,
