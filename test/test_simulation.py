@@ -347,6 +347,89 @@ def test_settled_contact_rows_against_their_definition_in_numpy():
     assert np.count_nonzero(reaction == 0.0) == near.size + deep.size
 
 
+def _squeezed_before_bending_in_numpy(start, prediction, grip_probe, ends, rest, threshold,
+                                      centers_from, centers, radii, active, reach) -> bool:
+    at = np.where((grip_probe >= 0)[:, None], prediction, start)
+    shortest = (1.0 - threshold) * rest
+    if np.any(np.linalg.norm(at[ends[:, 1]] - at[ends[:, 0]], axis=1) < shortest):
+        return True
+    short = np.linalg.norm(prediction[ends[:, 1]] - prediction[ends[:, 0]], axis=1) < shortest
+    middle = 0.5 * (prediction[ends[short, 0]] + prediction[ends[short, 1]])
+    for k in np.flatnonzero(active):
+        path = centers[k] - centers_from[k]
+        along = np.clip((middle - centers_from[k]) @ path / max(path @ path, 1e-300), 0.0, 1.0)
+        nearest = centers_from[k] + along[:, None] * path
+        if np.any(np.linalg.norm(middle - nearest, axis=1) <= reach * radii[k] + rest[short]):
+            return True
+    return False
+
+
+def test_squeezed_before_bending_against_its_definition_in_numpy():
+    """The check that lets the buckling iterations run before the bending solve: a spring
+    squeezed beyond the threshold in the sheet as the sub-step starts (gripped vertices
+    where their probe carries them), or in the prediction near an active probe's path
+    (within 1.1 radii and the spring's length); not a spring squeezed only in the
+    prediction away from the probes."""
+    sheet = build_flat_sheet(SheetConfig(nx=17, ny=17))
+    ends, rest = sheet.spring_vertices, sheet.spring_rest_length
+    rng = np.random.default_rng(5)
+    start = sheet.positions.copy()
+    centers = np.array([[0.0, 0.0, 0.0], [0.08, 0.1, 0.0]])
+    centers_from = centers - [[0.0, 0.0, 0.0], [0.0, 0.05, 0.0]]  # the second one moved
+    radii = np.array([0.02, 0.01])
+    answers = []
+    for case in range(40):
+        prediction = start + rng.normal(0.0, 0.0002, start.shape)
+        squeezed = rng.integers(0, ends.shape[0], 3)
+        # one end of a few springs carried towards the other, in the prediction only
+        prediction[ends[squeezed, 1]] = 0.5 * (prediction[ends[squeezed, 0]]
+                                               + prediction[ends[squeezed, 1]])
+        grip_probe = np.full(sheet.vertex_count, -1)
+        if case % 3 == 1:
+            grip_probe[ends[squeezed[0], 1]] = 0
+        active = np.array([case % 2 == 0, case % 4 == 0])
+        expected = _squeezed_before_bending_in_numpy(
+            start, prediction, grip_probe, ends, rest, 0.01, centers_from, centers, radii,
+            active, 1.1)
+        assert kernels.squeezed_before_bending(
+            start, prediction, grip_probe, bool(np.any(grip_probe >= 0)), ends, rest, 0.01,
+            centers_from, centers, radii, active, 1.1) == expected, f'case {case}'
+        answers.append(expected)
+    assert 5 < sum(answers) < 35  # both answers were asked for
+    start_squeezed = start.copy()
+    start_squeezed[ends[0, 1]] = start[ends[0, 0]] + 0.98 * (start[ends[0, 1]] - start[ends[0, 0]])
+    assert kernels.squeezed_before_bending(
+        start_squeezed, start_squeezed, np.full(sheet.vertex_count, -1), False, ends, rest,
+        0.01, centers[:0], centers[:0], radii[:0], np.zeros(0, dtype=bool), 1.1)
+
+
+def test_a_sheet_draping_onto_the_table_does_not_count_as_squeezed():
+    """The demo's sheet, clamped 0.2 m above the table, drapes onto it with no probe. Its
+    inertial prediction is squeezed where it meets the table (gravity takes it into the
+    table, friction holds a vertex on it while its neighbour lifting off moves on) though
+    the sheet itself is not: the buckling iterations before the bending solve have nothing
+    to do there and do not run."""
+    sim = build_simulator(scenario_from_mapping({
+        'name': 'drape', 'duration': 1.5, 'pin': 'short_edge',
+        'sheet': {'nx': 33, 'ny': 33, 'elevation': 0.0},
+        'contact': {'ground_enabled': True, 'ground_height': -0.2}}))
+    decided = []
+    check = sim._squeezed_before_bending
+
+    def recording(prediction, start_positions, probe_from, probe_to):
+        squeezed = check(prediction, start_positions, probe_from, probe_to)
+        decided.append((kernels.any_squeezed(prediction, sim._held_ends, sim._held_rest, 0.01),
+                        squeezed))
+        return squeezed
+    sim._squeezed_before_bending = recording
+    for _ in range(90):
+        sim.step_frame()
+    prediction_squeezed = sum(1 for in_prediction, _ in decided if in_prediction)
+    assert prediction_squeezed > 20, 'the prediction was expected to be squeezed on the table'
+    assert not any(squeezed for _, squeezed in decided)
+    assert sim.max_strain() < 0.005
+
+
 @pytest.mark.parametrize('radius', [0.005, 0.003])
 def test_a_probe_smaller_than_the_cells_pushes_the_sheet_instead_of_passing_through(radius):
     """`poke` at 33² (cells 6.6 x 9.3 mm) with a probe of 5 or 3 mm radius: it fits between

@@ -223,6 +223,8 @@ def bending_energy(positions, quads, weights, stiffness, rest_curvature):
     """Σ ½ k |κ - R κ0|² [J]."""
     total = 0.0
     for h in range(quads.shape[0]):
+        if stiffness[h] == 0.0:  # a hinge a patch covers (all of an intact sheet's)
+            continue
         curvature = _curvature_in_frame(positions, quads, weights, h)
         total += 0.5 * stiffness[h] * ((curvature[0] - rest_curvature[h, 0]) ** 2
                                        + (curvature[1] - rest_curvature[h, 1]) ** 2

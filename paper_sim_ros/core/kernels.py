@@ -660,6 +660,79 @@ def any_squeezed(positions, spring_vertices, rest_length, compression_threshold)
     return False
 
 
+@njit(cache=True, inline='always')
+def _gripped_edge(start_positions, prediction, grip_probe, i, j):
+    """x_j − x_i with a gripped end where its probe carries it (``prediction``)."""
+    ix = prediction[i, 0] if grip_probe[i] >= 0 else start_positions[i, 0]
+    iy = prediction[i, 1] if grip_probe[i] >= 0 else start_positions[i, 1]
+    iz = prediction[i, 2] if grip_probe[i] >= 0 else start_positions[i, 2]
+    jx = prediction[j, 0] if grip_probe[j] >= 0 else start_positions[j, 0]
+    jy = prediction[j, 1] if grip_probe[j] >= 0 else start_positions[j, 1]
+    jz = prediction[j, 2] if grip_probe[j] >= 0 else start_positions[j, 2]
+    return jx - ix, jy - iy, jz - iz
+
+
+@njit(cache=True)
+def squeezed_before_bending(start_positions, prediction, grip_probe, gripping, spring_vertices,
+                            rest_length, compression_threshold, probe_from, probe_to,
+                            probe_radius, probe_active, reach):
+    """Whether a spring is shorter than (1 − ``compression_threshold``) × its rest length in
+    the sheet as the sub-step starts (``start_positions``; with ``gripping``, its gripped
+    vertices where their probes carry them in ``prediction``), or in the inertial
+    ``prediction`` with its midpoint within ``reach`` × radius and its own rest length of an
+    active probe's sweep (its centre's path from ``probe_from`` to ``probe_to``: the springs
+    the probe pushes, also where it is smaller than the cells;
+    Simulator._squeezed_before_bending says why). Stops at the first such spring."""
+    probing = False
+    for k in range(probe_active.shape[0]):
+        probing = probing or probe_active[k]
+    if not (gripping or probing):  # most sub-steps: the plain check, at its speed
+        return any_squeezed(start_positions, spring_vertices, rest_length,
+                            compression_threshold)
+    for s in range(spring_vertices.shape[0]):
+        i = spring_vertices[s, 0]
+        j = spring_vertices[s, 1]
+        shortest = (1.0 - compression_threshold) * rest_length[s]
+        dx = start_positions[j, 0] - start_positions[i, 0]
+        dy = start_positions[j, 1] - start_positions[i, 1]
+        dz = start_positions[j, 2] - start_positions[i, 2]
+        if gripping and (grip_probe[i] >= 0 or grip_probe[j] >= 0):
+            dx, dy, dz = _gripped_edge(start_positions, prediction, grip_probe, i, j)
+        if dx * dx + dy * dy + dz * dz < shortest * shortest:
+            return True
+        if not probing:
+            continue
+        dx = prediction[j, 0] - prediction[i, 0]
+        dy = prediction[j, 1] - prediction[i, 1]
+        dz = prediction[j, 2] - prediction[i, 2]
+        if dx * dx + dy * dy + dz * dz >= shortest * shortest:
+            continue
+        mx = 0.5 * (prediction[i, 0] + prediction[j, 0])
+        my = 0.5 * (prediction[i, 1] + prediction[j, 1])
+        mz = 0.5 * (prediction[i, 2] + prediction[j, 2])
+        for k in range(probe_active.shape[0]):
+            if not probe_active[k]:
+                continue
+            # the nearest point of the centre's path
+            px = probe_to[k, 0] - probe_from[k, 0]
+            py = probe_to[k, 1] - probe_from[k, 1]
+            pz = probe_to[k, 2] - probe_from[k, 2]
+            ex = mx - probe_from[k, 0]
+            ey = my - probe_from[k, 1]
+            ez = mz - probe_from[k, 2]
+            travel = px * px + py * py + pz * pz
+            along = 0.0
+            if travel > 0.0:
+                along = min(max((ex * px + ey * py + ez * pz) / travel, 0.0), 1.0)
+            ex -= along * px
+            ey -= along * py
+            ez -= along * pz
+            near = reach * probe_radius[k] + rest_length[s]
+            if ex * ex + ey * ey + ez * ez <= near * near:
+                return True
+    return False
+
+
 @njit(cache=True)
 def max_abs_strain(positions, spring_vertices, rest_length, spring_kind, kind):
     """Largest |l/l0 - 1| over the springs of one kind."""

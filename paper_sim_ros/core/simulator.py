@@ -29,6 +29,7 @@ from . import kernels
 from .config import SimulationConfig
 from .bending import SheetBending
 from .damage import DamageModel
+from .probe_compression import PROBE_REACH
 from .probes import Probes
 from .length_projection import project_lengths
 from .membrane import Membrane, membrane_weights
@@ -177,6 +178,10 @@ class Simulator:
         without a pause (a fingertip lifting off: _membrane_runs)."""
         self._start_positions = np.zeros((0, 3))
         """Where the sheet was at the start of the current sub-step."""
+        self.spring_iterations = 0
+        """Local/global iterations of the held springs ('constrained') since construction:
+        a frame's share is most of its cost where probes push the sheet (bench/bench_demo.py
+        prints it a frame)."""
         # damage (SPEC §4): breaks and folds at a fixed rate in simulated time
         self.damage = DamageModel(
             self.config.damage, self.config.seed, self.config.sheet.aux_stiffness,
@@ -809,7 +814,8 @@ class Simulator:
         iterations = solver.projective_iterations
         extra = solver.projective_max_iterations - iterations
         # a squeezed sheet: local/global iterations while it buckles, before bending
-        if iterations:
+        if iterations and self._squeezed_before_bending(positions, start_positions, probe_from,
+                                                        probe_to):
             self._buckling_iterations(positions, weighted_inertia, rhs, extra)
         # bending, from the prediction (or where buckling put the sheet), with the table's
         # reaction
@@ -830,6 +836,29 @@ class Simulator:
             self._spring_iteration(positions, weighted_inertia, rhs)
         if iterations:
             self._buckling_iterations(positions, weighted_inertia, rhs, extra)
+
+    def _squeezed_before_bending(self, prediction, start_positions, probe_from,
+                                 probe_to) -> bool:
+        """Whether the buckling iterations before the bending solve have a squeezed sheet to
+        work on: a held spring squeezed beyond ``buckling_compression`` in the sheet as the
+        sub-step starts (its gripped vertices where their probes carry them), or in the
+        inertial prediction within PROBE_REACH and a spring's length of an active probe's
+        sweep in this sub-step (what a probe's push carries on into the sheet around it,
+        also where the probe is smaller than the cells or lets go: ``poke`` strained 2.31 %
+        without these, 1.79 % with them; a probe crossing the sheet in one sub-step leaves
+        the paper it swept squeezed along its path). Elsewhere the prediction is squeezed
+        by what is not the sheet's: it takes a sheet lying on the table h²g into it, and
+        the table's push shortens the springs that slope onto it; friction holds a vertex
+        on the table while its neighbour lifting off moves on. In the demo's scene with no
+        probe, 129-387 springs of the prediction were beyond 1 % (the worst 89 %) where the
+        sheet itself had none beyond 0.4 %, and these iterations ran 2-6 times a frame for
+        nothing (docs/solver.md, "Buckling iterations")."""
+        probes = self.probes
+        return kernels.squeezed_before_bending(
+            start_positions, prediction, self._grip_probe, bool(np.any(self._grip_probe >= 0)),
+            self._held_ends, self._held_rest,
+            self.config.solver.buckling_compression, probe_from, probe_to, probes.radius,
+            probes.active, PROBE_REACH)
 
     def _buckling_iterations(self, positions, weighted_inertia, rhs, most: int) -> None:
         """Up to ``most`` more local/global iterations while the sheet is squeezed (more
@@ -981,6 +1010,7 @@ class Simulator:
     def _global_iteration(self, positions, rhs) -> None:
         """The springs' global step from the local step's ``rhs``, the contact rows settled
         on its solution (``_settle_contact_rows``)."""
+        self.spring_iterations += 1
         multipliers = self._global_step.solve(rhs, positions, *self._rows)
         for _ in range(CONTACT_ROW_PASSES):
             if not self._settle_contact_rows(positions, multipliers):
