@@ -348,12 +348,16 @@ def test_settled_contact_rows_against_their_definition_in_numpy():
 
 
 def _squeezed_before_bending_in_numpy(start, prediction, grip_probe, ends, rest, threshold,
-                                      centers_from, centers, radii, active, reach) -> bool:
+                                      table_top, centers_from, centers, radii, active,
+                                      reach) -> bool:
     at = np.where((grip_probe >= 0)[:, None], prediction, start)
     shortest = (1.0 - threshold) * rest
     if np.any(np.linalg.norm(at[ends[:, 1]] - at[ends[:, 0]], axis=1) < shortest):
         return True
     short = np.linalg.norm(prediction[ends[:, 1]] - prediction[ends[:, 0]], axis=1) < shortest
+    lowest = np.minimum(start[ends, 2].min(axis=1), prediction[ends, 2].min(axis=1))
+    if np.any(short & (lowest > table_top)):
+        return True
     middle = 0.5 * (prediction[ends[short, 0]] + prediction[ends[short, 1]])
     for k in np.flatnonzero(active):
         path = centers[k] - centers_from[k]
@@ -367,20 +371,24 @@ def _squeezed_before_bending_in_numpy(start, prediction, grip_probe, ends, rest,
 def test_squeezed_before_bending_against_its_definition_in_numpy():
     """The check that lets the buckling iterations run before the bending solve: a spring
     squeezed beyond the threshold in the sheet as the sub-step starts (gripped vertices
-    where their probe carries them), or in the prediction near an active probe's path
-    (within 1.1 radii and the spring's length); not a spring squeezed only in the
-    prediction away from the probes."""
+    where their probe carries them), or in the prediction off the table or near an active
+    probe's path (within 1.1 radii and the spring's length); not a spring squeezed only in
+    the prediction, on the table, away from the probes. Without a table, any spring
+    squeezed in the prediction."""
     sheet = build_flat_sheet(SheetConfig(nx=17, ny=17))
     ends, rest = sheet.spring_vertices, sheet.spring_rest_length
     rng = np.random.default_rng(5)
     start = sheet.positions.copy()
-    centers = np.array([[0.0, 0.0, 0.0], [0.08, 0.1, 0.0]])
+    start[:, 2] = np.where(start[:, 0] > 0.0, 0.0, 0.01)  # half of it on the table (z 0)
+    centers = np.array([[0.06, -0.12, 0.0], [0.08, 0.1, 0.0]])
     centers_from = centers - [[0.0, 0.0, 0.0], [0.0, 0.05, 0.0]]  # the second one moved
     radii = np.array([0.02, 0.01])
     answers = []
     for case in range(40):
-        prediction = start + rng.normal(0.0, 0.0002, start.shape)
-        squeezed = rng.integers(0, ends.shape[0], 3)
+        prediction = start + rng.normal(0.0, 0.00002, start.shape)
+        prediction[start[:, 2] == 0.0, 2] = 0.0  # the table holds its half
+        on_table = np.flatnonzero(np.all(start[ends, 2] == 0.0, axis=1))
+        squeezed = rng.choice(on_table if case % 3 != 2 else len(ends), 1 + case % 3)
         # one end of a few springs carried towards the other, in the prediction only
         prediction[ends[squeezed, 1]] = 0.5 * (prediction[ends[squeezed, 0]]
                                                + prediction[ends[squeezed, 1]])
@@ -388,19 +396,20 @@ def test_squeezed_before_bending_against_its_definition_in_numpy():
         if case % 3 == 1:
             grip_probe[ends[squeezed[0], 1]] = 0
         active = np.array([case % 2 == 0, case % 4 == 0])
+        table_top = -np.inf if case % 5 == 4 else 1e-6
         expected = _squeezed_before_bending_in_numpy(
-            start, prediction, grip_probe, ends, rest, 0.01, centers_from, centers, radii,
-            active, 1.1)
+            start, prediction, grip_probe, ends, rest, 0.01, table_top, centers_from, centers,
+            radii, active, 1.1)
         assert kernels.squeezed_before_bending(
             start, prediction, grip_probe, bool(np.any(grip_probe >= 0)), ends, rest, 0.01,
-            centers_from, centers, radii, active, 1.1) == expected, f'case {case}'
+            table_top, centers_from, centers, radii, active, 1.1) == expected, f'case {case}'
         answers.append(expected)
     assert 5 < sum(answers) < 35  # both answers were asked for
     start_squeezed = start.copy()
     start_squeezed[ends[0, 1]] = start[ends[0, 0]] + 0.98 * (start[ends[0, 1]] - start[ends[0, 0]])
     assert kernels.squeezed_before_bending(
         start_squeezed, start_squeezed, np.full(sheet.vertex_count, -1), False, ends, rest,
-        0.01, centers[:0], centers[:0], radii[:0], np.zeros(0, dtype=bool), 1.1)
+        0.01, 1e-6, centers[:0], centers[:0], radii[:0], np.zeros(0, dtype=bool), 1.1)
 
 
 def test_a_sheet_draping_onto_the_table_does_not_count_as_squeezed():

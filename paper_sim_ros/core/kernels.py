@@ -674,21 +674,21 @@ def _gripped_edge(start_positions, prediction, grip_probe, i, j):
 
 @njit(cache=True)
 def squeezed_before_bending(start_positions, prediction, grip_probe, gripping, spring_vertices,
-                            rest_length, compression_threshold, probe_from, probe_to,
+                            rest_length, compression_threshold, table_top, probe_from, probe_to,
                             probe_radius, probe_active, reach):
     """Whether a spring is shorter than (1 − ``compression_threshold``) × its rest length in
-    the sheet as the sub-step starts (``start_positions``; with ``gripping``, its gripped
-    vertices where their probes carry them in ``prediction``), or in the inertial
-    ``prediction`` with its midpoint within ``reach`` × radius and its own rest length of an
-    active probe's sweep (its centre's path from ``probe_from`` to ``probe_to``: the springs
-    the probe pushes, also where it is smaller than the cells;
-    Simulator._squeezed_before_bending says why). Stops at the first such spring."""
+    the inertial ``prediction`` where that is the sheet's doing: everywhere without a table
+    (``table_top`` −inf); with one, where neither end lies on it (at or below ``table_top``,
+    as the sub-step starts or in the prediction), or within ``reach`` × radius and the
+    spring's rest length of an active probe's sweep (its centre's path from ``probe_from``
+    to ``probe_to``); or in the sheet as the sub-step starts (``start_positions``; with
+    ``gripping``, its gripped vertices where their probes carry them in ``prediction``).
+    Simulator._squeezed_before_bending says why. Stops at the first such spring."""
+    if table_top == -np.inf:
+        return any_squeezed(prediction, spring_vertices, rest_length, compression_threshold)
     probing = False
     for k in range(probe_active.shape[0]):
         probing = probing or probe_active[k]
-    if not (gripping or probing):  # most sub-steps: the plain check, at its speed
-        return any_squeezed(start_positions, spring_vertices, rest_length,
-                            compression_threshold)
     for s in range(spring_vertices.shape[0]):
         i = spring_vertices[s, 0]
         j = spring_vertices[s, 1]
@@ -700,12 +700,15 @@ def squeezed_before_bending(start_positions, prediction, grip_probe, gripping, s
             dx, dy, dz = _gripped_edge(start_positions, prediction, grip_probe, i, j)
         if dx * dx + dy * dy + dz * dz < shortest * shortest:
             return True
-        if not probing:
-            continue
         dx = prediction[j, 0] - prediction[i, 0]
         dy = prediction[j, 1] - prediction[i, 1]
         dz = prediction[j, 2] - prediction[i, 2]
         if dx * dx + dy * dy + dz * dz >= shortest * shortest:
+            continue
+        if min(min(start_positions[i, 2], start_positions[j, 2]),
+               min(prediction[i, 2], prediction[j, 2])) > table_top:
+            return True
+        if not probing:
             continue
         mx = 0.5 * (prediction[i, 0] + prediction[j, 0])
         my = 0.5 * (prediction[i, 1] + prediction[j, 1])

@@ -840,25 +840,27 @@ class Simulator:
     def _squeezed_before_bending(self, prediction, start_positions, probe_from,
                                  probe_to) -> bool:
         """Whether the buckling iterations before the bending solve have a squeezed sheet to
-        work on: a held spring squeezed beyond ``buckling_compression`` in the sheet as the
-        sub-step starts (its gripped vertices where their probes carry them), or in the
-        inertial prediction within PROBE_REACH and a spring's length of an active probe's
-        sweep in this sub-step (what a probe's push carries on into the sheet around it,
-        also where the probe is smaller than the cells or lets go: ``poke`` strained 2.31 %
-        without these, 1.79 % with them; a probe crossing the sheet in one sub-step leaves
-        the paper it swept squeezed along its path). Elsewhere the prediction is squeezed
-        by what is not the sheet's: it takes a sheet lying on the table h²g into it, and
-        the table's push shortens the springs that slope onto it; friction holds a vertex
-        on the table while its neighbour lifting off moves on. In the demo's scene with no
-        probe, 129-387 springs of the prediction were beyond 1 % (the worst 89 %) where the
-        sheet itself had none beyond 0.4 %, and these iterations ran 2-6 times a frame for
-        nothing (docs/solver.md, "Buckling iterations")."""
+        work on: a held spring squeezed beyond ``buckling_compression`` in the inertial
+        prediction, but on the table only within PROBE_REACH and a spring's length of an
+        active probe's sweep in this sub-step, or in the sheet as the sub-step starts (its
+        gripped vertices where their probes carry them). On the table the prediction is
+        squeezed by what is not the sheet's: it takes a sheet lying there h²g into it, the
+        table's push shortens the springs that slope onto it, and friction holds a vertex
+        on it while its neighbour lifting off moves on. In the demo's scene with no probe,
+        129-387 springs of the prediction were beyond 1 % (the worst 89 %) where the sheet
+        itself had none beyond 0.4 %, and these iterations ran 2-6 times a frame for
+        nothing. Near a probe they are the probe's push carried on into the sheet (a fast
+        probe leaves the paper it swept squeezed along its path; a small one squeezes
+        springs whose midpoints lie beyond its reach). Figures: docs/solver.md, "Buckling
+        iterations"."""
         probes = self.probes
+        contact = self.config.contact
+        table_top = contact.ground_height + TABLE_TOLERANCE if contact.ground_enabled \
+            else -np.inf
         return kernels.squeezed_before_bending(
             start_positions, prediction, self._grip_probe, bool(np.any(self._grip_probe >= 0)),
-            self._held_ends, self._held_rest,
-            self.config.solver.buckling_compression, probe_from, probe_to, probes.radius,
-            probes.active, PROBE_REACH)
+            self._held_ends, self._held_rest, self.config.solver.buckling_compression,
+            table_top, probe_from, probe_to, probes.radius, probes.active, PROBE_REACH)
 
     def _buckling_iterations(self, positions, weighted_inertia, rhs, most: int) -> None:
         """Up to ``most`` more local/global iterations while the sheet is squeezed (more
