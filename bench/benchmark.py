@@ -54,7 +54,8 @@ def row(label: str, grid: int, metrics: dict) -> str:
         extra = f"  breaks {metrics['breaks']:>5}  folds {metrics['folds']:>5}"
     return (f"{label:<24} {grid:>4}²  RTF {metrics['realtime_factor']:7.2f}  "
             f"frame {metrics['frame_ms_mean']:7.2f} ms (p95 {metrics['frame_ms_p95']:7.2f})  "
-            f"max strain {metrics['max_strain']:9.4%}  nan {metrics['nan']!s:>5}{extra}")
+            f"max strain {metrics['max_strain']:9.4%}  nan {metrics['nan']!s:>5}  "
+            f"asleep {metrics['frames_asleep'] / metrics['steps']:4.0%}{extra}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -70,7 +70,8 @@ def row(metrics: dict) -> str:
             f"  folds {metrics['folds']:>4}  relaxed {1e3 * metrics['relaxed_deviation_m']:6.2f}"
             f" mm  follow {metrics['follow']:5.2f}  valid {metrics['mesh_valid']!s:>5}  "
             f"mass err {metrics['mass_error']:.1e}  RTF {metrics['realtime_factor']:5.2f}  "
-            f"final p99 speed {1e3 * metrics['final_p99_speed_mps']:.3f} mm/s")
+            f"asleep {metrics['frames_asleep'] / metrics['steps']:4.0%}  final p99 speed "
+            f"{1e3 * metrics['final_p99_speed_mps']:.3f} mm/s")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
                         help='solver.energy_restoring on (docs/solver.md)')
     parser.add_argument('--length-projection', action='store_true',
                         help='solver.length_projection on (docs/solver.md)')
+    parser.add_argument('--no-sleep', action='store_true',
+                        help='solver.sleep_speed 0: the sheet never sleeps (docs/solver.md)')
     parser.add_argument('--membrane', type=float, default=None,
                         help="the membrane at this weight in every sub-step (membrane_scope "
                         "'always'; 0: none; default: the solver's)")
@@ -94,6 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     options = {option: True for option in ('energy_restoring', 'length_projection')
                if getattr(args, option)}
+    if args.no_sleep:
+        options['sleep_speed'] = 0.0
     if args.membrane is not None:
         options.update(membrane_weight=args.membrane, membrane_scope='always')
     if args.membrane_iterations is not None:
@@ -119,7 +124,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"{min(m['follow'] for m in group):.2f}  all valid "
                   f"{all(m['mesh_valid'] for m in group)}  RTF "
                   f"{min(m['realtime_factor'] for m in group):.2f}–"
-                  f"{max(m['realtime_factor'] for m in group):.2f}", flush=True)
+                  f"{max(m['realtime_factor'] for m in group):.2f}  asleep "
+                  f"{min(m['frames_asleep'] / m['steps'] for m in group):.0%}–"
+                  f"{max(m['frames_asleep'] / m['steps'] for m in group):.0%}", flush=True)
     return 0
 
 

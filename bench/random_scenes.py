@@ -1,7 +1,7 @@
 """Random scenes no test names: how the core holds up outside the built-in scenarios.
 
     .venv/bin/python bench/random_scenes.py [--family table pinned poke wild] [--count 40]
-        [--start 0] [--jobs 2] [--time-limit 200] [--membrane 30]
+        [--start 0] [--jobs 2] [--time-limit 200] [--membrane 30] [--no-sleep]
 
 Each run is drawn from its index alone (reproducible): a sheet of random size (0.1-0.3 m)
 and grid (17-65 a side, cells near square), a random material, sub-step count, seed and
@@ -158,13 +158,16 @@ def _alarm(signum, frame):
     raise _TooSlow()
 
 
-def measure(family: str, index: int, time_limit: int, membrane: float | None = None) -> dict:
+def measure(family: str, index: int, time_limit: int, membrane: float | None = None,
+            sleep: bool = True) -> dict:
     """One run (``membrane``: the membrane's weight in every sub-step, None: the scene's
-    own): its figures, or what went wrong."""
+    own; ``sleep``: False, the sheet never sleeps): its figures, or what went wrong."""
     mapping = scene(family, index)
     if membrane is not None:
         mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': membrane,
                              'membrane_scope': 'always'}
+    if not sleep:
+        mapping['solver'] = {**(mapping.get('solver') or {}), 'sleep_speed': 0.0}
     record = {'family': family, 'index': index, 'problems': []}
     signal.signal(signal.SIGALRM, _alarm)
     signal.alarm(time_limit)
@@ -176,7 +179,8 @@ def measure(family: str, index: int, time_limit: int, membrane: float | None = N
         metrics = run_scenario(scenario, simulator=simulator)
         record.update(strain=metrics['max_strain'], breaks=metrics['breaks'],
                       folds=metrics['folds'], in_probe=metrics['max_probe_penetration_m'],
-                      below_table=metrics['max_table_penetration_m'])
+                      below_table=metrics['max_table_penetration_m'],
+                      asleep=metrics['frames_asleep'] / max(metrics['steps'], 1))
         if metrics['nan']:
             record['problems'].append('non-finite state')
         if not metrics['mesh_valid']:
@@ -206,16 +210,19 @@ def main() -> None:
     parser.add_argument('--membrane', type=float, default=None,
                         help="the membrane at this weight in every sub-step of every run "
                         "(membrane_scope 'always'; 0: none)")
+    parser.add_argument('--no-sleep', action='store_true',
+                        help='solver.sleep_speed 0 in every run: the sheet never sleeps')
     args = parser.parse_args()
-    runs = [(family, index, args.time_limit, args.membrane) for family in args.family
-            for index in range(args.start, args.start + args.count)]
+    runs = [(family, index, args.time_limit, args.membrane, not args.no_sleep)
+            for family in args.family for index in range(args.start, args.start + args.count)]
     records = []
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         for record in pool.map(measure, *zip(*runs)):
             records.append(record)
             figures = (f"strain {100 * record['strain']:8.2f} %  breaks {record['breaks']:4d}  "
                        f"folds {record['folds']:5d}  in probe {1e3 * record['in_probe']:6.2f} mm  "
-                       f"below table {1e3 * record['below_table']:5.2f} mm"
+                       f"below table {1e3 * record['below_table']:5.2f} mm  "
+                       f"asleep {record['asleep']:4.0%}"
                        if 'strain' in record else f"refused: {record.get('refused', '')}")
             print(f"{record['family']:7s} {record['index']:4d}  {figures}  "
                   f"{record['seconds']:6.1f} s  {'; '.join(record['problems'])}", flush=True)

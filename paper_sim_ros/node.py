@@ -787,6 +787,7 @@ class PaperSimNode(Node):
             'active_probes': int(np.count_nonzero(simulator.probes.active)),
             'pinned_vertices': int(np.count_nonzero(sheet.pinned)),
             'nan_rolled_back': bool(simulator.nan_seen),
+            'asleep': bool(simulator.asleep),
             'recording': self._recorder.path if self._recorder is not None else '',
         }
         status = diagnostic_status(DIAGNOSTIC_NAME, self.get_fully_qualified_name(), level,

@@ -194,6 +194,25 @@ def test_markers_are_valid_for_rviz(sim):
 
 # -------------------------------------------------------------------------------- probes
 @pytest.mark.slow
+def test_a_sheet_left_alone_sleeps_and_a_probe_pressing_it_wakes_it(sim):
+    """solver.sleep_speed: the sheet lying untouched on the table sleeps (its frames cost
+    nothing); a probe pressing it wakes it at once, and once the probe has let go and the
+    sheet has settled, it sleeps again. The diagnostics say which."""
+    def asleep(value: str, pressing: bool):
+        def reported() -> bool:
+            if pressing:
+                sim.pose_publisher.publish(pose(sim, PRESS))
+            latest = sim.latest('/diagnostics')
+            return latest is not None and \
+                {pair.key: pair.value for pair in latest.status[0].values}['asleep'] == value
+        return reported
+    sim.spin_until(asleep('true', False), 10, 'the untouched sheet asleep', sim.process)
+    sim.spin_until(asleep('false', True), 10, 'the pressed sheet awake', sim.process)
+    sim.spin_until(asleep('true', False), 30, 'the sheet asleep again after the probe let go',
+                   sim.process)
+
+
+@pytest.mark.slow
 def test_a_probe_moves_the_points_under_it_and_letting_go_stops_it(sim):
     reset(sim)
     before = fresh_cloud(sim)

@@ -152,6 +152,13 @@ class SolverConfig:
     projected back to the edge lengths loses about (vh/L)²/3 of a swinging sheet's speed a
     frame. On, one sub-step swings as 128 do; off by default because a sheet that keeps its
     swing is strained more by what then touches it (docs/solver.md)."""
+    sleep_speed: float = 1e-4
+    """A sheet whose every vertex moved slower than this [m/s] for ``sleep_time``, with
+    nothing near it changing, falls asleep: it holds still at no cost until a probe near it
+    moves, appears or leaves, or the sheet or the settings change (a physics engine's
+    sleeping body; docs/solver.md, "Sleeping"). 0: never."""
+    sleep_time: float = 0.5
+    """How long [s] a sheet stays that still before it falls asleep."""
 
     def __post_init__(self) -> None:
         _require(self.method in SOLVERS, f'method must be one of {SOLVERS}, got {self.method!r}')
@@ -172,6 +179,8 @@ class SolverConfig:
         _finite_non_negative('air_damping', self.air_damping)
         _finite_non_negative('air_density', self.air_density)
         _finite_non_negative('drag_coefficient', self.drag_coefficient)
+        _finite_non_negative('sleep_speed', self.sleep_speed)
+        _finite_non_negative('sleep_time', self.sleep_time)
         _require(math.isfinite(self.buckling_compression) and 0 < self.buckling_compression < 1,
                  f'buckling_compression must be in (0, 1), got {self.buckling_compression!r}')
         _finite_positive('global_stiffness', self.global_stiffness)

@@ -69,6 +69,9 @@ class DamageModel:
         self.creases: list[tuple[int, int, int]] = []
         """(i, m, j) of every break: m is the vertex inserted between i and j."""
         self.capped = False
+        self.stressed = False
+        """Whether the last check found springs compressed enough to gather hazard (a sheet
+        so stressed may still break at rest: it does not fall asleep)."""
         self._clock = 0.0
         self.probe_compression = ProbeCompression()
         """What the probes pushed since the last check (used when ``held_inextensible``)."""
@@ -105,6 +108,7 @@ class DamageModel:
         """One damage check (``periods`` checks' worth of probability): Eq. 7 breaks, then
         hinge folds. Returns True if the mesh changed."""
         config = self.config
+        self.stressed = False
         if self._at_cap(sheet.vertex_count):
             return False
         compression = self.compression(sheet)
@@ -112,6 +116,7 @@ class DamageModel:
         candidates = compressed[breakable_springs(
             sheet.spring_kind[compressed], sheet.spring_vertices[compressed],
             sheet.spring_rest_length[compressed], sheet.pinned, config.min_breakable_length)]
+        self.stressed = candidates.size > 0
         broken = np.zeros(0, dtype=np.int64)
         if candidates.size:
             self._draw_thresholds(sheet.spring_count)

@@ -1124,6 +1124,16 @@ def _turn(positions, velocities, centre, wx, wy, wz, h):
 
 
 @njit(cache=True)
+def max_speed(velocities):
+    """The largest |v| over the rows of (V, 3) ``velocities``."""
+    largest = 0.0
+    for i in range(velocities.shape[0]):
+        squared = velocities[i, 0] ** 2 + velocities[i, 1] ** 2 + velocities[i, 2] ** 2
+        largest = max(largest, squared)
+    return np.sqrt(largest)
+
+
+@njit(cache=True)
 def all_finite(values):
     for x in values.ravel():
         if not np.isfinite(x):

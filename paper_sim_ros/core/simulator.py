@@ -45,6 +45,10 @@ NEAR_PIN_SWEEPS = 8
 TABLE_ITERATIONS = 10
 """Bending solves per sub-step at most while the table's reaction settles; fewer leave a
 sheet at rest on the table quivering (docs/solver.md)."""
+SLEEP_MARGIN = 0.005
+"""How far [m] beyond PROBE_REACH of its radius a probe that moves wakes the sheet, measured
+between the sheet's bounding box and the probe's sweep over the frame (_probes_disturb): a
+probe that touches the sheet in a frame is always that near."""
 TABLE_TOLERANCE = 1e-6
 """Contact violation [m] at which the table's reaction counts as settled."""
 TABLE_ROWS_MOST = 256
@@ -178,6 +182,15 @@ class Simulator:
         without a pause (a fingertip lifting off: _membrane_runs)."""
         self._start_positions = np.zeros((0, 3))
         """Where the sheet was at the start of the current sub-step."""
+        self.asleep = False
+        """Whether the sheet sleeps (``solver.sleep_speed``): its frames cost nothing and it
+        holds still until something near it changes (_wake)."""
+        self._quiet_frames = 0
+        """Frames in a row in which the sheet stayed still and nothing near it changed."""
+        self.frames_asleep = 0
+        """Frames stepped asleep since the last reset (at no cost)."""
+        self._probes_seen = Probes()
+        """The probes as they were at the end of the last frame (_probes_disturb)."""
         self.spring_iterations = 0
         """Local/global iterations of the held springs ('constrained') since construction:
         a frame's share is most of its cost where probes push the sheet (bench/bench_demo.py
@@ -193,6 +206,7 @@ class Simulator:
         included) instead of this sheet's current shape, for a copy of ``other``'s sheet."""
         if self.config.solver.method != 'constrained' or other._bending is None:
             return
+        self._wake()
         sheet = self.sheet
         self._bending = SheetBending(sheet.positions, sheet.triangles, sheet.material,
                                      self.config.sheet.bending_rigidity,
@@ -207,6 +221,7 @@ class Simulator:
         solver_changed = config.solver != self.config.solver
         method_changed = config.solver.method != self.config.solver.method
         self.config = config
+        self._wake()  # the table, friction or gravity may have changed under a still sheet
         if method_changed:
             # what Eq. 7 reads as compression belongs to the solver: a held sheet's lengths
             # are the strain band's, its compression the probes' (a sheet crumpled by the
@@ -258,6 +273,7 @@ class Simulator:
     def topology_changed(self) -> None:
         """Rebuild what is derived from the mesh or the pins: inverse masses, the
         constraint sweep order, the long-range attachments and the global step's factor."""
+        self._wake()
         sheet = self.sheet
         self._inverse_mass = np.where(sheet.pinned, 0.0, 1.0 / sheet.vertex_mass)
         hinge = sheet.spring_kind == HINGE
@@ -418,6 +434,12 @@ class Simulator:
         """Advance one frame of ``dt``. If the state ever turned non-finite the frame is
         rolled back, velocities zeroed and ``nan_seen`` set: nothing non-finite escapes."""
         solver = self.config.solver
+        if self._probes_disturb():
+            self._wake()
+        if self.asleep:
+            self.frames_asleep += 1
+            self._end_frame()
+            return
         substeps = solver.substeps
         h = solver.dt / substeps
         saved_positions = self.sheet.positions.copy()
@@ -436,8 +458,9 @@ class Simulator:
             probe_to = self.probes.start + probe_path * ((sub + 1) / substeps)
             self._substep(h, probe_from, probe_to)
         # nothing non-finite escapes: such a frame is rolled back
-        if not (kernels.all_finite(self.sheet.positions)
-                and kernels.all_finite(self.sheet.velocities)):
+        rolled_back = not (kernels.all_finite(self.sheet.positions)
+                           and kernels.all_finite(self.sheet.velocities))
+        if rolled_back:
             self.nan_seen = True
             self.sheet.positions[:] = saved_positions
             self.sheet.velocities[:] = 0.0
@@ -451,8 +474,10 @@ class Simulator:
         if solver.method == 'constrained':
             self._yield_memory()
         creases_before = len(self.damage.creases)
-        if self.damage.advance(self.sheet, solver.dt, self.probes, self._grip_probe,
-                               self.sheet.positions - saved_positions):
+        mesh_changed = self.damage.advance(self.sheet, solver.dt, self.probes,
+                                           self._grip_probe,
+                                           self.sheet.positions - saved_positions)
+        if mesh_changed:
             self._keep_creases_out(self.damage.creases[creases_before:])
             self.topology_changed()
         elif self._global_step is not None and self._global_step.step.stale:
@@ -468,9 +493,66 @@ class Simulator:
                               != changes_before):
             self._restore_energy(energy_before - 2.0 * solver.air_damping * solver.dt
                                  * kinetic_before - self._air_taken)
+        still = not (rolled_back or yielded or mesh_changed
+                     or self._bending_step is not None and self._bending.matrix_changed
+                     or self.damage.stressed) \
+            and kernels.max_speed(self.sheet.velocities) < solver.sleep_speed \
+            and self._would_stop()
+        self._quiet_frames = self._quiet_frames + 1 if still else 0
+        if self._quiet_frames >= max(1, math.ceil(solver.sleep_time / solver.dt - 1e-9)):
+            self.asleep = True
+            self.sheet.velocities[:] = 0.0
+        self._end_frame()
+
+    def _end_frame(self) -> None:
         self.probes.start = self.probes.end.copy()
-        self.time += solver.dt
+        self._probes_seen = Probes(radius=self.probes.radius.copy(),
+                                   start=self.probes.start, end=self.probes.start,
+                                   active=self.probes.active.copy())
+        self.time += self.config.solver.dt
         self.frame += 1
+
+    # ----------------------------------------------------------------------- sleeping
+    def _wake(self) -> None:
+        self.asleep = False
+        self._quiet_frames = 0
+
+    def _would_stop(self) -> bool:
+        """Whether something would stop the sheet's slow drift: the air's linear drag, a
+        pin, the table under it or a probe's grip. A free sheet in a vacuum never sleeps:
+        it keeps its momentum however slowly it moves."""
+        sheet, contact = self.sheet, self.config.contact
+        return (self.config.solver.air_damping > 0 or bool(np.any(sheet.pinned))
+                or bool(np.any(self._grip_probe >= 0))
+                or contact.ground_enabled
+                and sheet.positions[:, 2].min() <= contact.ground_height + TABLE_TOLERANCE)
+
+    def _probes_disturb(self) -> bool:
+        """Whether a probe near the sheet moved, appeared, left or changed its radius since
+        the last frame (what keeps it awake, or wakes it). Near: within PROBE_REACH of its
+        radius plus SLEEP_MARGIN of the sheet's bounding box, where it was or on its way."""
+        probes, seen = self.probes, self._probes_seen
+        if probes.count != seen.count:
+            return bool(np.any(probes.active) or np.any(seen.active))
+        changed = (probes.active != seen.active) | (probes.radius != seen.radius) \
+            | np.any(probes.end != probes.start, axis=1) | np.any(probes.start != seen.end,
+                                                                  axis=1)
+        changed &= probes.active | seen.active
+        if not np.any(changed):
+            return False
+        positions = self.sheet.positions
+        low, high = positions.min(axis=0), positions.max(axis=0)
+        for index in np.flatnonzero(changed):
+            for active, start, end, radius in (
+                    (probes.active[index], probes.start[index], probes.end[index],
+                     probes.radius[index]),
+                    (seen.active[index], seen.end[index], seen.end[index],
+                     seen.radius[index])):
+                reach = PROBE_REACH * radius + SLEEP_MARGIN
+                if active and np.all(np.minimum(start, end) - reach <= high) \
+                        and np.all(np.maximum(start, end) + reach >= low):
+                    return True
+        return False
 
     def _kinetic_energy(self) -> float:
         sheet = self.sheet
