@@ -434,7 +434,8 @@ class Simulator:
         """Advance one frame of ``dt``. If the state ever turned non-finite the frame is
         rolled back, velocities zeroed and ``nan_seen`` set: nothing non-finite escapes."""
         solver = self.config.solver
-        if self._probes_disturb():
+        # an awake sheet with no still frames counted has nothing a disturbance could reset
+        if (self.asleep or self._quiet_frames) and self._probes_disturb():
             self._wake()
         if self.asleep:
             self.frames_asleep += 1
