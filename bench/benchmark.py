@@ -1,11 +1,15 @@
-"""Benchmark of the solvers on the `hanging` scenario (and `squeeze`, with damage).
+"""Benchmark of the solvers on the `hanging` scenario (and `squeeze`, with damage), and of
+every built-in scenario at 65² against issue 13's targets.
 
     .venv/bin/python bench/benchmark.py [--grids 33 65 129] [--duration 10] [--quick]
+        [--builtins-grid 65]
 
 Single-threaded (NUMBA_NUM_THREADS=1), kernels compiled before timing. Prints, per grid
 and solver option: real-time factor, mean and 95th-percentile frame time, max strain
-over the run, and whether anything went non-finite. A script, not a test: timings
-depend on the machine and its load.
+over the run, whether anything went non-finite, and the share of frames the sheet slept
+through (docs/solver.md, "Sleeping"); then each built-in scenario, damage on, seed 0, its
+own duration, at ``--builtins-grid`` (0: none). A script, not a test: timings depend on the
+machine and its load.
 """
 from __future__ import annotations
 
@@ -19,7 +23,7 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
-from paper_sim_ros.core import load_scenario, run_scenario  # noqa: E402
+from paper_sim_ros.core import BUILTIN_SCENARIOS, load_scenario, run_scenario  # noqa: E402
 from paper_sim_ros.core.scenarios import builtin_mapping, with_overrides  # noqa: E402
 from paper_sim_ros.warmup import warm_up  # noqa: E402
 
@@ -35,7 +39,7 @@ SOLVER_OPTIONS = {
 # (test_explicit_euler_diverges_where_the_paper_method_does_not)
 
 
-def measure(name: str, grid: int, duration: float, solver: dict, damage: bool) -> dict:
+def measure(name: str, grid: int, duration: float | None, solver: dict, damage: bool) -> dict:
     mapping = with_overrides(builtin_mapping(name), grid=grid, duration=duration)
     mapping['solver'] = {**(mapping.get('solver') or {}), **solver}
     if not damage:
@@ -65,6 +69,8 @@ def main(argv: list[str] | None = None) -> int:
                         help='simulated seconds of hanging per run (default 10)')
     parser.add_argument('--quick', action='store_true',
                         help='default solver only, 2 s per run')
+    parser.add_argument('--builtins-grid', type=int, default=65,
+                        help='grid of the built-in scenarios section (0: skip it)')
     args = parser.parse_args(argv)
     options = {'constrained (default)': {}} if args.quick else SOLVER_OPTIONS
     duration = 2.0 if args.quick else args.duration
@@ -79,6 +85,11 @@ def main(argv: list[str] | None = None) -> int:
         for damage in (False, True):
             label = 'squeeze, damage ' + ('on' if damage else 'off')
             print(row(label, grid, measure('squeeze', grid, 3.0, {}, damage)), flush=True)
+    if args.builtins_grid:
+        print('every built-in scenario (damage on, seed 0, its own duration), default solver')
+        for name in BUILTIN_SCENARIOS:
+            print(row(name, args.builtins_grid,
+                      measure(name, args.builtins_grid, None, {}, True)), flush=True)
     return 0
 
 

@@ -5,10 +5,12 @@ refused with a reason."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_srvs.srv import Trigger
@@ -177,6 +179,48 @@ def test_organised_cloud_shows_the_sheet_with_its_material_coordinates(camera_no
     np.testing.assert_allclose(points['u'][paper], points['x'][paper], atol=2e-3)
     np.testing.assert_allclose(points['v'][paper], -points['y'][paper], atol=2e-3)
     np.testing.assert_allclose(points['z'][paper], HEIGHT_ABOVE, atol=2e-3)
+
+
+def test_a_probe_above_a_sleeping_sheet_shows_in_the_image_and_leaves_the_sheet_asleep(
+        camera_node):
+    """The sheet on the table sleeps, and the node keeps its colours and images while it
+    does (node._at_rest); a probe passing 25 cm above it, far out of its reach, does not wake
+    it, but the camera above sees it, and sees the sheet again once the probe has gone."""
+    client = camera_node
+    client.subscribe(DiagnosticArray, '/diagnostics')
+    poses = client.node.create_publisher(PoseStamped, 'probe/pose', 10)
+    depth_topic = TOPICS['depth'][0]
+
+    def asleep() -> bool:
+        latest = client.latest('/diagnostics')
+        return latest is not None and \
+            {pair.key: pair.value for pair in latest.status[0].values}['asleep'] == 'true'
+
+    def middle_depth(since: float) -> float:
+        client.spin_until(lambda: client.messages(depth_topic, since), 10, 'a depth image')
+        image = client.messages(depth_topic, since)[-1]
+        pixels = np.frombuffer(bytes(image.data), '<f4').reshape(HEIGHT, WIDTH)
+        return float(pixels[HEIGHT // 2, WIDTH // 2])
+
+    def hover() -> None:
+        message = PoseStamped()
+        message.header.frame_id = 'world'
+        message.header.stamp = client.node.get_clock().now().to_msg()
+        message.pose.position.z = 0.25
+        message.pose.orientation.w = 1.0
+        poses.publish(message)
+
+    client.spin_until(asleep, 20, 'the sheet asleep')
+    assert middle_depth(time.monotonic()) == pytest.approx(HEIGHT_ABOVE, abs=2e-3)
+    client.spin_for(1.0, hover)
+    since = time.monotonic()
+    client.spin_for(1.0, hover)
+    # the probe (radius 0.02 m) between the camera and the sheet
+    assert middle_depth(since) == pytest.approx(HEIGHT_ABOVE - 0.25 - 0.02, abs=2e-3)
+    client.spin_until(lambda: client.messages('/diagnostics', since), 10, 'diagnostics')
+    assert asleep(), 'a probe 25 cm above the sheet woke it'
+    client.spin_for(1.5)  # probe_timeout 0.5 s: the probe has gone
+    assert middle_depth(time.monotonic()) == pytest.approx(HEIGHT_ABOVE, abs=2e-3)
 
 
 def test_cameras_go_on_at_their_rate_after_a_reset(camera_node):

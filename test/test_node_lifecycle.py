@@ -92,10 +92,12 @@ def test_falling_behind_is_graceful_and_reported(tmp_path):
     the simulation slips behind the clock, outputs keep coming, diagnostics tell."""
     domain = new_domain_id()
     # 1000 frames per second of a 65² sheet: no machine of ours keeps up (a frame takes
-    # several milliseconds), so the node must fall behind
+    # several milliseconds), so the node must fall behind; kept awake (a sheet lying still
+    # on the table sleeps after half a second, and a sleeping sheet's frames cost nothing)
     process = start_node(tmp_path, {'sheet.nx': 65, 'sheet.ny': 65, 'physics_rate': 1000.0,
                                     'publish_rate': 200.0, 'markers_rate': 50.0,
-                                    'max_catchup_frames': 2, 'diagnostics_rate': 2.0},
+                                    'max_catchup_frames': 2, 'diagnostics_rate': 2.0,
+                                    'solver.sleep_speed': 0.0},
                          domain_id=domain)
     client = RosClient(domain)
     try:

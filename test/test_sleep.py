@@ -85,14 +85,16 @@ def test_a_probe_holding_still_on_the_sheet_keeps_it_asleep_and_wakes_it_when_it
     step(simulator, frames_for(simulator, 0.6), center=pressing)
     assert simulator.asleep
     positions = simulator.sheet.positions.copy()
+    rest_id, energy = simulator.rest_id, simulator.energy()
     step(simulator, 10, center=pressing)
     assert simulator.asleep and np.array_equal(simulator.sheet.positions, positions)
+    assert simulator.rest_id == rest_id is not None and simulator.energy() == energy
     # it drags the paper 1 mm a frame: awake at once, the gripped paper carried along
     iterations = simulator.spring_iterations
     for frame in range(1, 11):
         step(simulator, 1, center=(0.001 * frame, 0.0, RADIUS - 0.001))
         assert not simulator.asleep
-    assert simulator.spring_iterations > iterations
+    assert simulator.spring_iterations > iterations and simulator.rest_id is None
     under = np.linalg.norm(positions[:, :2], axis=1) < 0.5 * RADIUS
     moved = simulator.sheet.positions[under, 0] - positions[under, 0]
     assert np.all(moved > 0.008), moved

@@ -21,6 +21,7 @@ in simulated time (core/damage.py), never per sub-step.
 """
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -45,6 +46,8 @@ NEAR_PIN_SWEEPS = 8
 TABLE_ITERATIONS = 10
 """Bending solves per sub-step at most while the table's reaction settles; fewer leave a
 sheet at rest on the table quivering (docs/solver.md)."""
+_REST_IDS = itertools.count(1)
+"""Ids of the rests a sheet falls asleep into, unique in the process (Simulator.rest_id)."""
 SLEEP_MARGIN = 0.005
 """How far [m] beyond PROBE_REACH of its radius a probe that moves wakes the sheet, measured
 between the sheet's bounding box and the probe's sweep over the frame (_probes_disturb): a
@@ -187,6 +190,11 @@ class Simulator:
         holds still until something near it changes (_wake)."""
         self._quiet_frames = 0
         """Frames in a row in which the sheet stayed still and nothing near it changed."""
+        self.rest_id: int | None = None
+        """While the sheet sleeps, an id of this rest, unique in the process (its state
+        stands until it wakes): what derives from the sheet alone may be kept under it, as
+        its colours or its camera images; None while it is awake."""
+        self._rest_energy: float | None = None
         self.frames_asleep = 0
         """Frames stepped asleep since the last reset (at no cost)."""
         self._probes_seen = Probes()
@@ -502,6 +510,7 @@ class Simulator:
         self._quiet_frames = self._quiet_frames + 1 if still else 0
         if self._quiet_frames >= max(1, math.ceil(solver.sleep_time / solver.dt - 1e-9)):
             self.asleep = True
+            self.rest_id = next(_REST_IDS)
             self.sheet.velocities[:] = 0.0
         self._end_frame()
 
@@ -517,6 +526,7 @@ class Simulator:
     def _wake(self) -> None:
         self.asleep = False
         self._quiet_frames = 0
+        self.rest_id = self._rest_energy = None
 
     def _would_stop(self) -> bool:
         """Whether something would stop the sheet's slow drift: the air's linear drag, a
@@ -1422,13 +1432,18 @@ class Simulator:
         """Kinetic + gravitational + elastic energy [J]. The elastic part counts what
         acts as a force: every spring for 'paper' and 'explicit'; for 'constrained' the
         dihedral bending, its held springs being inextensible (their slack within the
-        strain band stores nothing)."""
+        strain band stores nothing). Computed once for a sleeping sheet."""
+        if self._rest_energy is not None:
+            return self._rest_energy
         sheet = self.sheet
         gravity = np.asarray(self.config.solver.gravity)
         kinetic = self._kinetic_energy()
         potential = -np.sum(sheet.vertex_mass * (sheet.positions @ gravity))
         if self.config.solver.method == 'constrained':
-            return float(kinetic + potential + self._bending.energy(sheet.positions))
+            energy = float(kinetic + potential + self._bending.energy(sheet.positions))
+            if self.asleep:
+                self._rest_energy = energy
+            return energy
         elastic_springs = np.ones(sheet.spring_count, dtype=bool)
         ends = sheet.spring_vertices[elastic_springs]
         length = np.linalg.norm(sheet.positions[ends[:, 1]] - sheet.positions[ends[:, 0]], axis=1)
