@@ -643,18 +643,21 @@ class PaperSimNode(Node):
         return self._at_rest('colors', lambda: self._appearance.vertex_colors(
             self.simulator.sheet))
 
-    def _at_rest(self, key, compute):
+    def _at_rest(self, key, compute, inputs=()):
         """``compute()``, kept under ``key`` while the sheet sleeps in one rest (its state
-        stands: Simulator.rest_id); computed afresh while it is awake."""
+        stands: Simulator.rest_id) and ``inputs`` stay equal (only the latest is kept, so a
+        probe moving about a sleeping sheet does not pile up images); computed afresh while
+        it is awake."""
         rest_id = self.simulator.rest_id
         if rest_id is None:
             self._rest_outputs.clear()
             return compute()
         if self._rest_outputs.get('rest_id') != rest_id:
             self._rest_outputs = {'rest_id': rest_id}
-        if key not in self._rest_outputs:
-            self._rest_outputs[key] = compute()
-        return self._rest_outputs[key]
+        kept = self._rest_outputs.get(key)
+        if kept is None or kept[0] != inputs:
+            kept = self._rest_outputs[key] = (inputs, compute())
+        return kept[1]
 
     def _publish_camera(self, index: int, stamp: TimeMessage, colors: np.ndarray,
                         read: tuple[bool, bool, bool, bool]) -> None:
@@ -667,8 +670,8 @@ class PaperSimNode(Node):
         probes = self.simulator.probes
         # the image of a sleeping sheet stands while the camera and the probes do
         seen = (config, probes.end.tobytes(), probes.radius.tobytes(), probes.active.tobytes())
-        image = self._at_rest(('camera', index, seen),
-                              lambda: render_simulator(config, self.simulator, colors))
+        image = self._at_rest(('camera', index),
+                              lambda: render_simulator(config, self.simulator, colors), seen)
         frame = with_depth_noise(image, camera.depth_noise_stddev, rng)
         header = Header(frame_id=config.optical_frame, stamp=stamp)
         if self._bag is not None and config.name not in self._cameras_on_tf_static:
