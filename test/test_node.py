@@ -194,21 +194,25 @@ def test_markers_are_valid_for_rviz(sim):
 
 # -------------------------------------------------------------------------------- probes
 @pytest.mark.slow
-def test_a_sheet_left_alone_sleeps_and_a_probe_pressing_it_wakes_it(sim):
+def test_a_sheet_left_alone_sleeps_and_a_probe_moving_near_it_wakes_it(sim):
     """solver.sleep_speed: the sheet lying untouched on the table sleeps (its frames cost
-    nothing); a probe pressing it wakes it at once, and once the probe has let go and the
-    sheet has settled, it sleeps again. The diagnostics say which."""
-    def asleep(value: str, pressing: bool):
+    nothing); a probe moving 3 mm above it, within its reach but touching nothing (so the
+    sheet stays where the next tests expect it), wakes it at once, and once the probe has
+    gone it sleeps again. The diagnostics say which."""
+    started = time.monotonic()
+
+    def asleep(value: str, hovering: bool):
         def reported() -> bool:
-            if pressing:
-                sim.pose_publisher.publish(pose(sim, PRESS))
+            if hovering:
+                x = 0.02 * math.sin(2.0 * (time.monotonic() - started))
+                sim.pose_publisher.publish(pose(sim, (x, 0.0, PROBE_RADIUS + 0.003)))
             latest = sim.latest('/diagnostics')
             return latest is not None and \
                 {pair.key: pair.value for pair in latest.status[0].values}['asleep'] == value
         return reported
     sim.spin_until(asleep('true', False), 10, 'the untouched sheet asleep', sim.process)
-    sim.spin_until(asleep('false', True), 10, 'the pressed sheet awake', sim.process)
-    sim.spin_until(asleep('true', False), 30, 'the sheet asleep again after the probe let go',
+    sim.spin_until(asleep('false', True), 10, 'the sheet awake under the probe', sim.process)
+    sim.spin_until(asleep('true', False), 30, 'the sheet asleep again after the probe left',
                    sim.process)
 
 
