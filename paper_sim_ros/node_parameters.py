@@ -187,9 +187,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "Conjugate-gradient iterations of the membrane's solve per sub-step, at "
                   'most (each a bending solve).', (0, 1000)),
     ParameterSpec('solver.sleep_speed', _SOLVER.sleep_speed,
-                  'A sheet whose every vertex moved slower than this [m/s] for sleep_time, '
-                  'nothing near it changing, sleeps: it holds still at no cost until a probe '
-                  'near it moves or the settings change (0: never).', (0.0, 1.0)),
+                  'A sheet whose every vertex moved slower than this [m/s] on average over '
+                  'sleep_time, and moves slower now, nothing near it changing, sleeps: it '
+                  'holds still at no cost until a probe near it moves or the settings change '
+                  '(0: never).', (0.0, 1.0)),
     ParameterSpec('solver.sleep_time', _SOLVER.sleep_time,
                   'How long [s] a sheet stays that still before it sleeps.', (0.0, 3600.0)),
     ParameterSpec('contact.ground_enabled', True, 'A table (ground plane) under the sheet.'),

@@ -145,3 +145,44 @@ def test_a_slowly_drifting_sheet_sleeps_in_air_but_keeps_its_momentum_in_a_vacuu
             kept = (mass * simulator.sheet.velocities).sum(axis=0)
             # not stopped: kept to the solve's rounding (1e-13 kg m/s of 1.5e-7)
             assert np.abs(kept - momentum).max() < 1e-4 * np.abs(momentum).max()
+
+
+def drifting_in_air() -> Simulator:
+    """A 17² sheet in still air with no gravity: it keeps what velocity it is given but for
+    the air's linear drag, which would stop it (so it may sleep)."""
+    return Simulator(SimulationConfig(
+        sheet=SheetConfig(nx=GRID, ny=GRID),
+        solver=SolverConfig(gravity=(0.0, 0.0, 0.0), air_damping=0.2, air_density=0.0),
+        damage=DamageConfig(enabled=False)))
+
+
+def test_a_sheet_at_rest_but_for_a_jolt_now_and_then_falls_asleep():
+    """What counts is each vertex's mean speed over sleep_time, not its speed in every frame:
+    a crumpled sheet at rest whose creases' memories jolted one vertex to 0.2 mm/s every
+    eleventh frame (65², seed 4) never slept while any frame's jolt restarted the count."""
+    simulator = drifting_in_air()
+    fastest = []
+    for frame in range(frames_for(simulator, 1.0)):
+        # still but for a jolt to 0.2 mm/s, twice sleep_speed, every eleventh frame
+        simulator.sheet.velocities[:] = (0.0, 0.0, 2e-4 if frame % 11 == 0 else 0.0)
+        step(simulator, 1)
+        fastest.append(np.linalg.norm(simulator.sheet.velocities, axis=1).max())
+        if simulator.asleep:
+            break
+    assert simulator.asleep
+    # the jolts moved a vertex faster than sleep_speed after the step, within the window
+    window = frames_for(simulator, 0.5)
+    assert max(fastest[-window:]) > 1e-4 and fastest[-1] < 1e-4
+
+
+def test_a_sheet_speeding_up_as_the_window_ends_is_not_frozen():
+    """Its mean speed over the last 0.5 s is below sleep_speed, but it moves faster than
+    that now: it stays awake; held at that speed it never sleeps."""
+    simulator = drifting_in_air()
+    window = frames_for(simulator, 0.5)
+    direction = np.array([0.6, 0.8, 0.0])
+    for frame in range(3 * window):
+        speed = 1.5e-4 * min(1.0, frame / window)  # up to 1.5 sleep_speed over the window
+        simulator.sheet.velocities[:] = speed * direction
+        step(simulator, 1)
+        assert not simulator.asleep, frame

@@ -153,10 +153,11 @@ class SolverConfig:
     frame. On, one sub-step swings as 128 do; off by default because a sheet that keeps its
     swing is strained more by what then touches it (docs/solver.md)."""
     sleep_speed: float = 1e-4
-    """A sheet whose every vertex moved slower than this [m/s] for ``sleep_time``, with
-    nothing near it changing, falls asleep: it holds still at no cost until a probe near it
-    moves, appears or leaves, or the sheet or the settings change (a physics engine's
-    sleeping body; docs/solver.md, "Sleeping"). 0: never."""
+    """A sheet whose every vertex moved slower than this [m/s] on average over the last
+    ``sleep_time``, and moves slower now, with nothing near it changing, falls asleep: it
+    holds still at no cost until a probe near it moves, appears or leaves, or the sheet or
+    the settings change (a physics engine's sleeping body; docs/solver.md, "Sleeping").
+    0: never."""
     sleep_time: float = 0.5
     """How long [s] a sheet stays that still before it falls asleep."""
 

@@ -1124,13 +1124,19 @@ def _turn(positions, velocities, centre, wx, wy, wz, h):
 
 
 @njit(cache=True)
-def max_speed(velocities):
-    """The largest |v| over the rows of (V, 3) ``velocities``."""
-    largest = 0.0
+def slide_paths(velocities, dt, recent, slot, paths):
+    """Each vertex's way over the last frames: ``recent`` (F, V) holds its |v| dt [m] of
+    each of F frames, ``paths`` (V,) their sums. This frame's goes into row ``slot``,
+    replacing the oldest. Returns the longest way and the largest |v| [m/s] now."""
+    longest = 0.0
+    fastest = 0.0
     for i in range(velocities.shape[0]):
-        squared = velocities[i, 0] ** 2 + velocities[i, 1] ** 2 + velocities[i, 2] ** 2
-        largest = max(largest, squared)
-    return np.sqrt(largest)
+        speed = np.sqrt(velocities[i, 0] ** 2 + velocities[i, 1] ** 2 + velocities[i, 2] ** 2)
+        paths[i] += speed * dt - recent[slot, i]
+        recent[slot, i] = speed * dt
+        longest = max(longest, paths[i])
+        fastest = max(fastest, speed)
+    return longest, fastest
 
 
 @njit(cache=True)
