@@ -1220,15 +1220,15 @@ class Simulator:
         self._start_positions = start_positions
         gripped = np.flatnonzero(self._gripped & ~self._grip_pinned)
         touched = np.zeros(sheet.vertex_count, dtype=bool)
-        # the prediction on the probes, and with no probe active nothing of it on the table:
-        # lifted onto it here, a sheet lying there left the bending solve a reaction of
-        # 1.5 % of its weight, which is all its friction, and slid on as if on ice
-        # (`squeeze` at 33², after the fingertips left: 0.25 m/s for over a second). With
-        # a probe active it still is (docs/contact.md, "What is wrong": the table's friction
-        # where probes push)
-        self._contact(positions, start_positions, probe_from, probe_to, True, touched,
-                      table_friction=False,
-                      table_for=None if np.any(self.probes.active) else touched)
+        # the prediction on the probes; with none active nothing to place, and nothing onto
+        # the table: lifted onto it here, a sheet lying there left the bending solve a
+        # reaction of 1.5 % of its weight, which is all its friction, and slid on as if on
+        # ice (`squeeze` at 33², after the fingertips left: 0.25 m/s for over a second).
+        # With a probe active it still is (docs/contact.md, "What is wrong": the table's
+        # friction where probes push)
+        if np.any(self.probes.active):
+            self._contact(positions, start_positions, probe_from, probe_to, True, touched,
+                          table_friction=False)
         touched[self._grip_probe >= 0] = False
         touched[sheet.pinned] = False
         contact = np.flatnonzero(touched)
@@ -1296,9 +1296,8 @@ class Simulator:
                 break
 
     def _contact(self, positions, start_positions, probe_from, probe_to, with_friction,
-                 touched=None, table_friction=True, table_for=None) -> int:
-        """Push the sheet out of the probes and the table; how many pushes that took.
-        ``table_for``: only these vertices out of the table (_set_contact_rows)."""
+                 touched=None, table_friction=True) -> int:
+        """Push the sheet out of the probes and the table; how many pushes that took."""
         contact = self.config.contact
         moved = 0
         # the probes first, the table last: the table is rigid, and a probe pressed into
@@ -1318,9 +1317,7 @@ class Simulator:
                     positions, self._inverse_mass, self.sheet.triangles, probe_from, probe_to,
                     self.probes.radius, small, pad_height, touched)
         if contact.ground_enabled:
-            inverse_mass = self._inverse_mass if table_for is None \
-                else np.where(table_for, self._inverse_mass, 0.0)
-            moved += kernels.project_ground(positions, start_positions, inverse_mass,
+            moved += kernels.project_ground(positions, start_positions, self._inverse_mass,
                                             contact.ground_height, contact.ground_friction,
                                             with_friction and table_friction,
                                             self._table_support)
