@@ -422,12 +422,15 @@ def test_squeeze_keeps_a_set_with_one_and_with_four_substeps(squeeze):
     smoothly instead of folding (2026-11-26, memories giving their pull beyond twice the
     band: 3.97 mm, 2 breaks, 84 folds; 1.15 mm, no break, 7 folds; before that: 6.24 and
     1.25 mm;
-    with hinges for bending, before issue 14: 5.97 and 3.71 mm). How much depends on the
-    sub-step count and the seed: README, known limitations."""
+    with hinges for bending, before issue 14: 5.97 and 3.71 mm). Since the table's friction
+    acts while probes push (2026-11-29) the paper ahead of the fingertips slides less and
+    the four sub-steps keep 0.77 mm (seeds 0-4: 0.77-0.98 mm; 1.06-1.66 mm on the
+    frictionless table before), with 1 sub-step 9.28 mm. How much depends on the sub-step
+    count and the seed: README, known limitations."""
     one = squeeze(substeps=1, grid=65)
     four = squeeze(substeps=4, grid=65)
     assert_squeezes_keep_a_set(squeeze)
-    assert four['relaxed_deviation_m'] > 1e-3, four
+    assert four['relaxed_deviation_m'] > 5e-4, four
     for metrics in (one, four):
         assert metrics['breaks'] < 40 and metrics['mesh_valid'], metrics
 

@@ -1255,20 +1255,21 @@ def test_strain_limiting_sweeps_skip_only_what_a_full_sweep_would_leave():
     assert skipped, 'no sweep skipped a block: the test shows nothing'
 
 
-@pytest.mark.parametrize('probe', ['none', 'listed, away'])
+@pytest.mark.parametrize('probe', ['none', 'listed, away', 'active, away'])
 def test_a_sheet_sliding_on_the_table_stops_by_its_friction(probe):
     """A sheet lying on the table, set sliding at 0.3 m/s, stops within about the Coulomb
-    distance v²/(2 μ g), 11 mm, whether or not the scene lists a probe. With a probe listed
+    distance v²/(2 μ g), 11 mm, whether or not the scene has a probe. With a probe listed
     (as the node always has, and a built-in scenario after its probes left) the prediction
     was placed on the table before the bending solve, whose reaction then held up 1.5 % of
     the sheet's weight, and the sheet slid on (14 cm here in 0.5 s; `squeeze` at 33²:
-    0.25 m/s for a second after the fingertips left)."""
+    0.25 m/s for a second after the fingertips left). With one active it still is, and the
+    table's lift of the prediction is friction's normal force there (14 cm before)."""
     simulator = Simulator(SimulationConfig(
         sheet=SheetConfig(nx=17, ny=17), contact=ContactConfig(ground_enabled=True),
         solver=SolverConfig(sleep_speed=0.0), damage=DamageConfig(enabled=False)))
     centers, radii = np.array([[0.0, 0.0, 0.5]]), np.array([0.01])
-    if probe != 'none':  # a probe the scene lists, half a metre above the sheet, inactive
-        simulator.set_probes(centers, radii, np.array([False]))
+    if probe != 'none':  # a probe half a metre above the sheet
+        simulator.set_probes(centers, radii, np.array([probe.startswith('active')]))
     for _ in range(30):  # settled on the table
         simulator.step_frame()
     start = simulator.sheet.positions.mean(axis=0)

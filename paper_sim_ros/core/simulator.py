@@ -157,6 +157,10 @@ class Simulator:
         self._grips_standing = 0
         self._table_reaction = np.zeros(self.sheet.vertex_count)
         """The table's push on each vertex in the last bending step [N] (a warm start)."""
+        self._table_lift = np.zeros(self.sheet.vertex_count)
+        """How far the table lifted each vertex's inertial prediction before the last
+        sub-step's solves [m] (_set_contact_rows): the table's push there, as a
+        displacement, which its friction's normal force takes as well as the solve's."""
         self._rest_shape = self.sheet.positions.copy()
         """Where each vertex lay when its rest was last set (the sheet as built, a crumple's
         plastic shape, a new vertex where damage made it): how far from a pin the sheet
@@ -306,6 +310,7 @@ class Simulator:
         self._grip_pinned = np.concatenate([self._grip_pinned, np.zeros(added, dtype=bool)])
         self._slipping = np.concatenate([self._slipping, np.zeros(added, dtype=bool)])
         self._table_reaction = np.concatenate([self._table_reaction, np.zeros(added)])
+        self._table_lift = np.concatenate([self._table_lift, np.zeros(added)])
         self._rest_shape = np.concatenate([self._rest_shape,
                                            sheet.positions[sheet.vertex_count - added:]])
         if self.config.solver.method != 'constrained':
@@ -735,9 +740,10 @@ class Simulator:
         start_positions = positions.copy()
         contact = self.config.contact
         if contact.ground_enabled:
-            # the table's push inside the last solve, as a displacement [m]: its friction's
-            # share
-            self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass
+            # the table's push over the last sub-step, as a displacement [m]: inside the
+            # solve and, while a probe is active, on the prediction before it
+            self._table_support = self._table_reaction * (h * h) / sheet.vertex_mass \
+                + self._table_lift
         # inertia, springs and bending: implicit ('constrained') or as forces
         constrained = self.config.solver.method == 'constrained'
         if constrained:
@@ -1196,6 +1202,7 @@ class Simulator:
         sheet = self.sheet
         self._probe_from, self._probe_to = probe_from, probe_to
         self._factor_grips()
+        self._table_lift[:] = 0.0
         if not self.probes.count:  # nothing to hold (nor gripped: grips need a probe)
             self._rows, self._contact_row = NO_ROWS, np.zeros(0, dtype=bool)
             self._lifting_off = np.zeros(0, dtype=bool)
@@ -1224,11 +1231,16 @@ class Simulator:
         # the table: lifted onto it here, a sheet lying there left the bending solve a
         # reaction of 1.5 % of its weight, which is all its friction, and slid on as if on
         # ice (`squeeze` at 33², after the fingertips left: 0.25 m/s for over a second).
-        # With a probe active it still is (docs/contact.md, "What is wrong": the table's
-        # friction where probes push)
+        # With a probe active it still is, and the lift counts as the table's push
         if np.any(self.probes.active):
+            below = self.config.contact.ground_height - positions[:, 2]
             self._contact(positions, start_positions, probe_from, probe_to, True, touched,
                           table_friction=False)
+            # the lift is the table's push on the prediction: its friction's normal force
+            # where the sheet lies on it (h² g for paper at rest there: its weight)
+            if self.config.contact.ground_enabled:
+                np.maximum(below, 0.0, out=self._table_lift)
+                self._table_lift[touched] = 0.0
         touched[self._grip_probe >= 0] = False
         touched[sheet.pinned] = False
         contact = np.flatnonzero(touched)
