@@ -1281,3 +1281,27 @@ def test_a_sheet_sliding_on_the_table_stops_by_its_friction(probe):
     coulomb = speed ** 2 / (2.0 * friction * 9.81)
     assert 0.5 * coulomb < travel < 1.5 * coulomb, (travel, coulomb)
     assert np.linalg.norm(simulator.sheet.velocities, axis=1).max() < 1e-3
+
+
+def test_a_sheet_a_fingertip_pushes_over_the_table_stops_when_the_fingertip_stops():
+    """`slide` (17²): the fingertip pushes the sheet's edge 10 cm over the table at 57.5 mm/s
+    and stops. The sheet goes with it and stops too, within the Coulomb distance v²/(2 μ g),
+    0.42 mm, and one frame's travel, 0.96 mm. While a probe was active the table's friction
+    was all but absent and the sheet slid on 3.5 mm, at 6.5 mm/s half a second later."""
+    scenario = load_scenario('slide', grid=17)
+    simulator = build_simulator(scenario)
+    dt = scenario.config.solver.dt
+    start = simulator.sheet.positions[:, 1].mean()
+    stopped = None
+    for frame in range(scenario.frame_count):
+        time = (frame + 1) * dt
+        simulator.set_probes(*scenario.probe_inputs(time))
+        simulator.step_frame()
+        if stopped is None and time >= 2.5 - 1e-9:  # the fingertip's last keyframe on the table
+            stopped = simulator.sheet.positions[:, 1].mean()
+    pushed = stopped - start
+    after = simulator.sheet.positions[:, 1].mean() - stopped
+    assert pushed > 0.08, pushed  # the fingertip meets the edge 15 mm into its 115 mm
+    speed = 0.115 / 2.0
+    coulomb = speed ** 2 / (2.0 * scenario.config.contact.ground_friction * 9.81)
+    assert abs(after) < coulomb + speed * dt, (after, coulomb)
