@@ -363,12 +363,15 @@ def test_squeeze_keeps_its_damage_and_rubber_springs_back(squeeze):
     3.6–5.8 mm), 0.00 mm without. Issue 3
     asked for 5 mm; seed 0 gave 6.24 mm until the table's contacts were held exactly in
     the bending solve (seeds 0–4 then: 3.2–7.3 mm): the set a squeeze leaves depends on
-    the seed that much (docs/contact.md)."""
+    the seed that much (docs/contact.md). Since the strain band lets a gripped sheet
+    buckle (2026-11-29) seed 0 keeps 10.78 mm (seeds 0-4: 9.47-10.78 mm) with no break:
+    its set is plastic, where the sheet bends round the fingertips' fronts."""
     damaged = squeeze(grid=65)
     rubber = squeeze(enabled=False, grid=65)
     assert_squeezes_keep_a_set(squeeze)
+    assert damaged['relaxed_deviation_m'] > 5e-3, damaged  # issue 3 asked 5 mm
     assert rubber['relaxed_deviation_m'] < 1e-5, rubber  # issue 3 asks < 1 mm
-    assert damaged['breaks'] > 0 and rubber['breaks'] == rubber['folds'] == 0
+    assert rubber['breaks'] == rubber['folds'] == 0
     for metrics in (damaged, rubber):
         assert metrics['mesh_valid'] and metrics['problems'] == [], metrics['problems']
         assert metrics['mass_conserved']
@@ -423,14 +426,14 @@ def test_squeeze_keeps_a_set_with_one_and_with_four_substeps(squeeze):
     band: 3.97 mm, 2 breaks, 84 folds; 1.15 mm, no break, 7 folds; before that: 6.24 and
     1.25 mm;
     with hinges for bending, before issue 14: 5.97 and 3.71 mm). Since the table's friction
-    acts while probes push (2026-11-29) the paper ahead of the fingertips slides less and
-    the four sub-steps keep 0.77 mm (seeds 0-4: 0.77-0.98 mm; 1.06-1.66 mm on the
-    frictionless table before), with 1 sub-step 9.28 mm. How much depends on the sub-step
-    count and the seed: README, known limitations."""
+    acts while probes push and the strain band lets a gripped sheet buckle (2026-11-29) the
+    four sub-steps keep 0.52 mm (seeds 0-4: 0.52-1.07 mm; 1.06-1.66 mm on the frictionless
+    table before), with 1 sub-step 10.78 mm; an undamaged sheet relaxes to 0.00 mm. How much
+    depends on the sub-step count and the seed: README, known limitations."""
     one = squeeze(substeps=1, grid=65)
     four = squeeze(substeps=4, grid=65)
     assert_squeezes_keep_a_set(squeeze)
-    assert four['relaxed_deviation_m'] > 5e-4, four
+    assert four['relaxed_deviation_m'] > 2.5e-4, four
     for metrics in (one, four):
         assert metrics['breaks'] < 40 and metrics['mesh_valid'], metrics
 

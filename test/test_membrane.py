@@ -147,11 +147,13 @@ def test_a_squeezed_sheet_arches_instead_of_crushing(seed):
     (``membrane_scope`` 'squeezed'). Without it the split solve crushes the sheet
     (measured 114.9 / 230.1 % at seeds 0 / 4, 1 / 8 breaks, 60 / 102 folds); with it the
     arch carries the thrust: measured 20.1 / 22.1 %, no fold, 0 / 1 break, nothing inside
-    a fingertip or the table, the mesh valid."""
+    a fingertip or the table, the mesh valid. Since the table's friction acts while the
+    fingertips push and the strain band lets a gripped sheet buckle (2026-11-29): 12.2 /
+    12.6 %, no fold, 0 / 2 breaks."""
     metrics = run_scenario(load_scenario(with_overrides(builtin_mapping('squeeze'), grid=33,
                                                         seed=seed)))
     assert metrics['max_strain'] < 0.25
-    assert metrics['folds'] == 0 and metrics['breaks'] <= 1
+    assert metrics['folds'] == 0 and metrics['breaks'] <= 2
     assert metrics['max_probe_penetration_m'] < 5e-4
     assert metrics['max_table_penetration_m'] < 5e-4
     assert metrics['mesh_valid'] and not metrics['nan']

@@ -111,6 +111,11 @@ class SolverConfig:
     """Stretch the projection aims for at most (l/l0 - 1)."""
     max_compression: float = 0.003
     """Compression the projection aims for at most (1 - l/l0)."""
+    gripped_max_compression: float = 0.05
+    """Compression the projection aims for at most while a probe grips the sheet on the
+    table. Paper pushed together there must buckle, which the projection's in-plane sweeps
+    cannot do: held to ``max_compression`` they only carry the compression to the grip,
+    which they cannot move (docs/contact.md, "The strain band while a fingertip grips")."""
     air_damping: float = 0.2
     """Linear air drag rate [1/s], mass proportional."""
     air_density: float = 1.2
@@ -173,7 +178,7 @@ class SolverConfig:
             _require(isinstance(value, int) and 0 <= value <= upper,
                      f'{name} must be an integer in [0, {upper}], got {value!r}')
         _require(self.substeps >= 1, 'substeps must be >= 1')
-        for name in ('max_stretch', 'max_compression'):
+        for name in ('max_stretch', 'max_compression', 'gripped_max_compression'):
             value = getattr(self, name)
             _require(math.isfinite(value) and 0 < value < 0.5,
                      f'{name} must be in (0, 0.5), got {value!r}')

@@ -1271,7 +1271,10 @@ class Simulator:
                       inverse_mass) -> None:
         solver = self.config.solver
         ends, rest = self._constraint_ends, self._constraint_rest
-        shortest = 1.0 - solver.max_compression
+        # paper a fingertip pushes together on the table buckles; the sweeps would only
+        # carry its compression to the grip's rim (docs/contact.md)
+        gripping = bool(np.any(self._grip_probe >= 0))
+        shortest = 1.0 - (solver.gripped_max_compression if gripping else solver.max_compression)
         longest = 1.0 + solver.max_stretch
         # where the sheet folds away from its pins the strain concentrates (a released
         # sheet folds at its clamped edge); a few more sweeps there cost a few rows only.
