@@ -181,8 +181,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'kept from crushing).', (0.0, 1.0e6)),
     ParameterSpec('solver.membrane_scope', _SOLVER.membrane_scope,
                   f'Sub-steps that take the membrane, one of {", ".join(MEMBRANE_SCOPES)}: '
-                  'squeezed, only while probes push the sheet together; always, every one (a '
-                  'drooping strip at the elastica, 1.5-4 times slower).'),
+                  'squeezed, only while probes push the sheet together; squeezed_or_settling, '
+                  'also while a pinned sheet hanging clear of the table settles to rest (a '
+                  'drooping strip rests at the elastica); always, every one (1.5-4 times '
+                  'slower).'),
     ParameterSpec('solver.membrane_iterations', _SOLVER.membrane_iterations,
                   "Conjugate-gradient iterations of the membrane's solve per sub-step, at "
                   'most (each a bending solve).', (0, 1000)),

@@ -102,13 +102,15 @@ def assert_strip_droops_as_the_elastica(overhang: float, spacing: float, solver:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize('overhang', [0.06, 0.1])
+@pytest.mark.parametrize('overhang', [0.06, 0.1, 0.15, 0.2])
 @pytest.mark.parametrize('spacing', [0.0025, 0.005, 0.01])
 def test_a_clamped_strip_droops_as_the_elastica(overhang, spacing):
-    """Paper's cantilever test, at the default settings, for tip angles of 4° and 19°, on
-    cells of 2.5 to 10 mm. Measured (bench/bench_cantilever.py): 0.994–1.000 of the
-    elastica; 0.92 at 49°, 0.86 at 72° (docs/solver.md)."""
-    assert_strip_droops_as_the_elastica(overhang, spacing, SolverConfig(air_damping=6.0), 0.03,
+    """Paper's cantilever test, at the default settings, for tip angles of 4°, 19°, 49°
+    and 72°, on cells of 2.5 to 10 mm. Measured (bench/bench_cantilever.py): 0.994–1.000
+    of the elastica. Before the membrane settled a hanging sheet the rest of the way
+    (``membrane_scope`` 'squeezed_or_settling', Simulator._settles_further) the split
+    step rested at 0.92 of it at 49° and 0.86 at 72° (docs/solver.md)."""
+    assert_strip_droops_as_the_elastica(overhang, spacing, SolverConfig(air_damping=6.0), 0.02,
                                         0.0031)  # the strain band
 
 

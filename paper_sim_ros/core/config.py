@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, fields
 import math
 
 SOLVERS = ('constrained', 'paper', 'explicit')
-MEMBRANE_SCOPES = ('squeezed', 'always')
+MEMBRANE_SCOPES = ('squeezed_or_settling', 'squeezed', 'always')
 
 
 def _require(condition: bool, message: str) -> None:
@@ -140,13 +140,16 @@ class SolverConfig:
     spring this × B / l0² (core/membrane.py; 0: none): the bending solve then keeps the
     edges' lengths while it turns them, which the springs' iterations alone cannot.
     Where it runs: ``membrane_scope``."""
-    membrane_scope: str = 'squeezed'
+    membrane_scope: str = 'squeezed_or_settling'
     """('constrained') Which sub-steps take the membrane: 'squeezed', only those in which
     probes push the sheet together (a fingertip pinches it on the table or a probe lifts
     off it, and a held spring is squeezed beyond ``buckling_compression``: the arch it
     buckles into is crushed without the membrane, docs/contact.md), so a sheet nothing
-    squeezes steps as fast as without it; 'always', every sub-step (a drooping strip then
-    settles at the elastica at every deflection, at 2-4 times the cost: docs/solver.md)."""
+    squeezes steps as fast as without it; 'squeezed_or_settling' (the default), those and,
+    once a pinned sheet hanging clear of the table would fall asleep, every sub-step until
+    it does so again: a drooping strip then rests at the elastica (without, 8-14 % short of
+    it beyond 45°), and only its last settling costs more; 'always', every sub-step (also
+    a swinging sheet, at 2-4 times the cost: docs/solver.md)."""
     membrane_iterations: int = 10
     """Conjugate-gradient iterations of the membrane's solve per sub-step, at most (each
     a bending solve)."""
