@@ -574,9 +574,9 @@ class Simulator:
         sheet's: a drooping strip rests 8-14 % short of the elastica's tip angle beyond
         45° whatever the grid (docs/solver.md, "The cantilever"), and with the membrane at
         the elastica (within 0.6 %), at 2-4 times a step's cost, which it then pays only
-        while it settles the rest of the way (0.5-2 s), not while it swings. On the table
-        the table carries the sheet, and the membrane there kept pinned sheets from ever
-        falling asleep."""
+        while it settles the rest of the way (0.5-2 s), not while it swings. A sheet on the
+        table is left out: the table carries it, and the membrane there only put its sleep
+        off by a window at several times a step's cost (docs/solver.md)."""
         solver, contact = self.config.solver, self.config.contact
         if self._settling or solver.membrane_scope != 'squeezed_or_settling' \
                 or not (solver.membrane_weight > 0.0 and self._held_ends.size) \
