@@ -577,13 +577,11 @@ class Simulator:
         while it settles the rest of the way (0.5-2 s), not while it swings. A sheet on the
         table is left out: the table carries it, and the membrane there only put its sleep
         off by a window at several times a step's cost (docs/solver.md)."""
-        solver, contact = self.config.solver, self.config.contact
-        if self._settling or solver.membrane_scope != 'squeezed_or_settling' \
-                or not (solver.membrane_weight > 0.0 and self._held_ends.size) \
-                or not np.any(self.sheet.pinned) or np.any(self.probes.active):
-            return False
-        return not (contact.ground_enabled and self.sheet.positions[:, 2].min()
-                    <= contact.ground_height + TABLE_TOLERANCE)
+        solver = self.config.solver
+        return not (self._settling or solver.membrane_scope != 'squeezed_or_settling'
+                    or not (solver.membrane_weight > 0.0 and self._held_ends.size)
+                    or not np.any(self.sheet.pinned) or np.any(self.probes.active)
+                    or self._on_table())
 
     def _wake(self) -> None:
         self.asleep = self._slow = self._settling = False
@@ -594,11 +592,14 @@ class Simulator:
         """Whether something would stop the sheet's slow drift: the air's linear drag, a
         pin, the table under it or a probe's grip. A free sheet in a vacuum never sleeps:
         it keeps its momentum however slowly it moves."""
-        sheet, contact = self.sheet, self.config.contact
-        return (self.config.solver.air_damping > 0 or bool(np.any(sheet.pinned))
-                or bool(np.any(self._grip_probe >= 0))
-                or contact.ground_enabled
-                and sheet.positions[:, 2].min() <= contact.ground_height + TABLE_TOLERANCE)
+        return (self.config.solver.air_damping > 0 or bool(np.any(self.sheet.pinned))
+                or bool(np.any(self._grip_probe >= 0)) or self._on_table())
+
+    def _on_table(self) -> bool:
+        """Whether any vertex lies on the table (within TABLE_TOLERANCE of it)."""
+        contact = self.config.contact
+        return contact.ground_enabled and bool(
+            self.sheet.positions[:, 2].min() <= contact.ground_height + TABLE_TOLERANCE)
 
     def _probes_disturb(self) -> bool:
         """Whether a probe near the sheet moved, appeared, left or changed its radius since
