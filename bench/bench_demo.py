@@ -28,15 +28,19 @@ PROBE_RADIUS = 0.02
 """The demo's probe radius [m] (config/paper_sim.yaml, probe_radii)."""
 
 
-def demo_scene(grid: int, duration: float, membrane: float | None = None):
-    """The demo's scenario: the node's defaults with the demo's overrides (demo.py);
+def demo_mapping(grid: int, duration: float, membrane: float | None = None) -> dict:
+    """The demo's scenario mapping: the node's defaults with the demo's overrides (demo.py);
     ``membrane``: the membrane's weight in every sub-step (None: the solver's default)."""
-    return load_scenario({
-        'name': 'demo', 'duration': duration, 'pin': 'short_edge',
-        'sheet': {'nx': grid, 'ny': grid, 'elevation': 0.0},
-        'solver': ({} if membrane is None
-                   else {'membrane_weight': membrane, 'membrane_scope': 'always'}),
-        'contact': {'ground_enabled': True, 'ground_height': -0.2}})
+    return {'name': 'demo', 'duration': duration, 'pin': 'short_edge',
+            'sheet': {'nx': grid, 'ny': grid, 'elevation': 0.0},
+            'solver': ({} if membrane is None
+                       else {'membrane_weight': membrane, 'membrane_scope': 'always'}),
+            'contact': {'ground_enabled': True, 'ground_height': -0.2}}
+
+
+def demo_scene(grid: int, duration: float, membrane: float | None = None):
+    """The demo's scenario (``demo_mapping``)."""
+    return load_scenario(demo_mapping(grid, duration, membrane))
 
 
 def run(grid: int, duration: float, membrane: float | None = None) -> dict:
