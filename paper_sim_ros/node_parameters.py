@@ -188,6 +188,19 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver.membrane_iterations', _SOLVER.membrane_iterations,
                   "Conjugate-gradient iterations of the membrane's solve per sub-step, at "
                   'most (each a bending solve).', (0, 1000)),
+    ParameterSpec('solver.gripped_max_compression', _SOLVER.gripped_max_compression,
+                  'Compression (1 - l/l0) the strain band allows while a fingertip grips the '
+                  'sheet on the table (paper pushed together there must buckle).',
+                  (1e-6, 0.49)),
+    ParameterSpec('solver.release_substeps', _SOLVER.release_substeps,
+                  'Sub-steps a frame, times substeps, for release_time after a fingertip '
+                  'lets go of the sheet (1: never more): a squeezed arch set free springs '
+                  'back in about a frame. With membrane_iterations 40 and '
+                  'gripped_max_compression 0.003, 4 keeps a squeeze near 7 % (docs/contact.md).',
+                  (1, 64)),
+    ParameterSpec('solver.release_time', _SOLVER.release_time,
+                  'How long [s] the sub-steps of release_substeps last after a let-go.',
+                  (0.0, 60.0)),
     ParameterSpec('solver.sleep_speed', _SOLVER.sleep_speed,
                   'A sheet whose every vertex moved slower than this [m/s] on average over '
                   'sleep_time, and moves slower now, nothing near it changing, sleeps: it '

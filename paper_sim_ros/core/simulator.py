@@ -144,6 +144,8 @@ class Simulator:
         self.nan_seen = False
         self.probes = Probes()
         self._release_grips()
+        self._release_frames = 0
+        """Frames left of the sub-steps that follow a let-go (``release_substeps``)."""
         self._sliding = np.zeros(0, dtype=bool)
         """Per probe: it slid over the paper (_slip_grips) and grips nothing new until it
         lifts off the table."""
@@ -368,7 +370,7 @@ class Simulator:
 
     def _system_settings(self) -> tuple:
         """What the two systems depend on besides the mesh, masses and pins."""
-        return (self.config.solver.dt / self.config.solver.substeps,
+        return (self.config.solver.dt / self.frame_substeps,
                 self.config.solver.global_stiffness, self.config.sheet.bending_rigidity)
 
     def _held_change(self, held: np.ndarray) -> tuple | None:
@@ -395,7 +397,7 @@ class Simulator:
         ``changes``: each system's change since its factor where it is known (a fold's:
         _held_change, SheetBending.matrix_change), which spares assembling it anew."""
         sheet = self.sheet
-        h = self.config.solver.dt / self.config.solver.substeps
+        h = self.config.solver.dt / self.frame_substeps
         pinned = sheet.pinned | self._grip_pinned
         self._table_reaction[pinned] = 0.0  # held vertices are not the solve's to support
         self._bending.matrix_changed = False
@@ -464,8 +466,9 @@ class Simulator:
             self.frames_asleep += 1
             self._end_frame()
             return
-        substeps = solver.substeps
+        substeps = self.frame_substeps
         h = solver.dt / substeps
+        gripping = self._gripping_probes()
         saved_positions = self.sheet.positions.copy()
         self._air_taken = 0.0
         """The kinetic energy the air's drag across the sheet took this frame [J]."""
@@ -517,6 +520,7 @@ class Simulator:
                               != changes_before):
             self._restore_energy(energy_before - 2.0 * solver.air_damping * solver.dt
                                  * kinetic_before - self._air_taken)
+        self._time_release(gripping)
         self._count_still_frame(not (rolled_back or yielded or mesh_changed
                                      or self._bending_step is not None
                                      and self._bending.matrix_changed
@@ -530,6 +534,34 @@ class Simulator:
                                    active=self.probes.active.copy())
         self.time += self.config.solver.dt
         self.frame += 1
+
+    @property
+    def frame_substeps(self) -> int:
+        """Sub-steps of a frame now: ``substeps``, times ``release_substeps`` for
+        ``release_time`` after a fingertip let go of the sheet."""
+        solver = self.config.solver
+        return solver.substeps * (solver.release_substeps if self._release_frames else 1)
+
+    def _gripping_probes(self) -> np.ndarray:
+        """The probes that grip the sheet now (indices)."""
+        gripped = self._grip_probe[self._grip_probe >= 0]
+        return np.unique(gripped) if gripped.size else gripped
+
+    def _time_release(self, gripping: np.ndarray) -> None:
+        """Count down the sub-steps that follow a let-go, start them where a probe that
+        gripped the sheet as the frame began (``gripping``) grips none of it now, and factor
+        the systems for the sub-step length that comes of it. A squeezed arch set free
+        springs back in about a frame, faster than one sub-step can follow
+        (``release_substeps``)."""
+        solver = self.config.solver
+        if solver.release_substeps == 1 or solver.method != 'constrained':
+            return
+        if self._release_frames:
+            self._release_frames -= 1
+        if gripping.size and np.setdiff1d(gripping, self._gripping_probes()).size:
+            self._release_frames = math.ceil(solver.release_time / solver.dt - 1e-9)
+        if self._global_step is not None and self._factored_settings != self._system_settings():
+            self._factor_global_steps()
 
     # ----------------------------------------------------------------------- sleeping
     def _count_still_frame(self, calm: bool) -> None:
