@@ -195,8 +195,7 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver.release_substeps', _SOLVER.release_substeps,
                   'Sub-steps a frame, times substeps, for release_time after a fingertip '
                   'lets go of the sheet (1: never more): a squeezed arch set free springs '
-                  'back in about a frame. With membrane_iterations 40 and '
-                  'gripped_max_compression 0.003, 4 keeps a squeeze near 7 % (docs/contact.md).',
+                  'back in about a frame, faster than one sub-step follows (docs/contact.md).',
                   (1, 64)),
     ParameterSpec('solver.release_time', _SOLVER.release_time,
                   'How long [s] the sub-steps of release_substeps last after a let-go.',

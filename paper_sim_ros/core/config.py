@@ -158,11 +158,11 @@ class SolverConfig:
     ``release_time`` after a fingertip lets go of the sheet (1: never more). A squeezed
     arch set free springs back in its bending mode in about a frame (a 0.2 m arch: a
     quarter period of 22 ms), which one sub-step cannot follow: its crest folds on the way
-    down. With ``membrane_iterations`` 40 and ``gripped_max_compression`` 0.003 as well,
-    4 takes the squeeze at 65² to 6.9–7.0 % over seeds 0–9 (12.6–19.2 % with the
-    defaults) at half its speed; not at 97² and finer, where the membrane needs more
-    iterations. Off by default: every let-go pays two factorisations and the sub-steps
-    (docs/contact.md, "The membrane's conjugate gradients run longer")."""
+    down (the squeeze at 65², seed 2, ``membrane_iterations`` 40 and
+    ``gripped_max_compression`` 0.003: 249 folds with 1, none with 4). Off by default:
+    every let-go pays two factorisations and the sub-steps, and what else the squeeze does
+    at those settings swings with them (docs/contact.md, "The membrane's conjugate
+    gradients run longer")."""
     release_time: float = 0.25
     """How long [s] the sub-steps of ``release_substeps`` last after a let-go."""
     energy_restoring: bool = False
