@@ -43,19 +43,23 @@ def demo_scene(grid: int, duration: float, membrane: float | None = None):
     return load_scenario(demo_mapping(grid, duration, membrane))
 
 
+def demo_probe_inputs(path: ProbePath, t: float) -> tuple:
+    """Simulator.set_probes' (centres, radii, active) for the scripted probe at time ``t``
+    [s] of ``path`` (inactive where the path has no probe)."""
+    centre = path.position(t)
+    return (np.zeros((1, 3)) if centre is None else np.asarray(centre)[None],
+            np.array([PROBE_RADIUS]), np.array([centre is not None]))
+
+
 def run(grid: int, duration: float, membrane: float | None = None) -> dict:
     """Step the demo's scene; frame times [s] and strains per frame."""
     scenario = demo_scene(grid, duration, membrane)
     simulator = build_simulator(scenario)
     path = ProbePath()
     dt = scenario.config.solver.dt
-    radius = np.array([PROBE_RADIUS])
     frame_seconds, strain = [], []
     for frame in range(scenario.frame_count):
-        centre = path.position((frame + 1) * dt)
-        active = np.array([centre is not None])
-        simulator.set_probes(np.zeros((1, 3)) if centre is None else np.asarray(centre)[None],
-                             radius, active)
+        simulator.set_probes(*demo_probe_inputs(path, (frame + 1) * dt))
         started = time.perf_counter()
         simulator.step_frame()
         frame_seconds.append(time.perf_counter() - started)

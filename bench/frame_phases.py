@@ -22,8 +22,6 @@ import time
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-import numpy as np  # noqa: E402
-
 import bench_demo  # noqa: E402
 from paper_sim_ros.core import build_simulator, load_scenario, simulator  # noqa: E402
 from paper_sim_ros.core.scenarios import builtin_mapping, with_overrides  # noqa: E402
@@ -58,13 +56,9 @@ def scene(name: str, grid: int, duration: float, damage: bool):
     if name == 'demo':
         mapping = bench_demo.demo_mapping(grid, duration)
         path = bench_demo.ProbePath()
-        radius = np.array([bench_demo.PROBE_RADIUS])
 
         def probe_inputs(t: float):
-            centre = path.position(t)
-            active = np.array([centre is not None])
-            return (np.zeros((1, 3)) if centre is None else np.asarray(centre)[None],
-                    radius, active)
+            return bench_demo.demo_probe_inputs(path, t)
     else:
         mapping = with_overrides(builtin_mapping(name), grid=grid, duration=duration)
         probe_inputs = None

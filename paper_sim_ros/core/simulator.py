@@ -468,7 +468,8 @@ class Simulator:
             return
         substeps = self.frame_substeps
         h = solver.dt / substeps
-        gripping = self._gripping_probes()
+        releasing = solver.release_substeps > 1 and solver.method == 'constrained'
+        gripping = self._gripping_probes() if releasing else None
         saved_positions = self.sheet.positions.copy()
         self._air_taken = 0.0
         """The kinetic energy the air's drag across the sheet took this frame [J]."""
@@ -520,7 +521,8 @@ class Simulator:
                               != changes_before):
             self._restore_energy(energy_before - 2.0 * solver.air_damping * solver.dt
                                  * kinetic_before - self._air_taken)
-        self._time_release(gripping)
+        if releasing:
+            self._time_release(gripping)
         self._count_still_frame(not (rolled_back or yielded or mesh_changed
                                      or self._bending_step is not None
                                      and self._bending.matrix_changed
@@ -554,8 +556,6 @@ class Simulator:
         springs back in about a frame, faster than one sub-step can follow
         (``release_substeps``)."""
         solver = self.config.solver
-        if solver.release_substeps == 1 or solver.method != 'constrained':
-            return
         if self._release_frames:
             self._release_frames -= 1
         if gripping.size and np.setdiff1d(gripping, self._gripping_probes()).size:
@@ -609,11 +609,10 @@ class Simulator:
         while it settles the rest of the way (0.5-2 s), not while it swings. A sheet on the
         table is left out: the table carries it, and the membrane there only put its sleep
         off by a window at several times a step's cost (docs/solver.md)."""
-        solver = self.config.solver
-        return not (self._settling or solver.membrane_scope != 'squeezed_or_settling'
-                    or not (solver.membrane_weight > 0.0 and self._held_ends.size)
-                    or not np.any(self.sheet.pinned) or np.any(self.probes.active)
-                    or self._on_table())
+        return not (self._settling
+                    or self.config.solver.membrane_scope != 'squeezed_or_settling'
+                    or not self._has_membrane() or not np.any(self.sheet.pinned)
+                    or np.any(self.probes.active) or self._on_table())
 
     def _wake(self) -> None:
         self.asleep = self._slow = self._settling = False
@@ -1123,12 +1122,16 @@ class Simulator:
         crumpled at rest, poked) steps as it would without the membrane, at its cost.
         'squeezed_or_settling': also while a hanging sheet settles (_settles_further)."""
         solver = self.config.solver
-        if not (solver.membrane_weight > 0.0 and self._held_ends.size):
+        if not self._has_membrane():
             return False
         if solver.membrane_scope == 'always' or self._settling:
             return True
         return bool(np.any(self._lifting_off)) and kernels.any_squeezed(
             positions, self._held_ends, self._held_rest, solver.buckling_compression)
+
+    def _has_membrane(self) -> bool:
+        """Whether the bending solve can take the held springs as a membrane at all."""
+        return self.config.solver.membrane_weight > 0.0 and self._held_ends.size > 0
 
     def _membrane_solve(self, rhs, positions, start_positions) -> None:
         """The bending solve again with the held springs as a membrane (core/membrane.py),
