@@ -152,6 +152,8 @@ class Statistics:
     window_dropped: int = 0
     window_slipped: int = 0
     window_refused: int = 0
+    window_max_strain: float = 0.0
+    """Largest HINGE strain of a frame since the last report."""
     last_real_time_factor: float = 0.0
     last_step_seconds: float = 0.0
     max_strain: float = 0.0
@@ -520,6 +522,7 @@ class PaperSimNode(Node):
             stats.last_step_seconds = seconds
             strain = simulator.max_strain()
             stats.max_strain = max(stats.max_strain, strain)
+            stats.window_max_strain = max(stats.window_max_strain, strain)
             stats.recent_strains.append(strain)
             # a camera renders the frame its slot falls on, also inside a tick of several
             # frames: its images keep to the grid t = k / rate of simulated time
@@ -788,6 +791,12 @@ class PaperSimNode(Node):
             problems.append(f'{stats.window_refused} probe poses refused')
         if simulator.nan_seen or stats.nonfinite_skipped:
             problems.append('non-finite state was rolled back')
+        strain_warning = self._settings.strain_warning
+        if strain_warning > 0 and stats.window_max_strain > strain_warning:
+            # paper stretches well under 1 %: beyond this the sheet is no longer paper
+            # (fingertips pushing it together on the table: docs/contact.md)
+            problems.append(f'sheet strained {stats.window_max_strain:.1%} '
+                            f'(beyond strain_warning {strain_warning:.1%})')
         if problems:
             level = DiagnosticStatus.WARN
         if stats.tick_errors:
@@ -809,6 +818,8 @@ class PaperSimNode(Node):
             'aux_springs': int(np.count_nonzero(kind == AUX)),
             'breaks': int(simulator.breaks),
             'folds': int(simulator.folds),
+            'max_strain': stats.window_max_strain,
+            'max_strain_run': stats.max_strain,
             **self.counters(),
             'active_probes': int(np.count_nonzero(simulator.probes.active)),
             'pinned_vertices': int(np.count_nonzero(sheet.pinned)),
@@ -824,6 +835,7 @@ class PaperSimNode(Node):
         stats.window_frames = stats.window_steps = stats.window_publishes = 0
         stats.window_step_seconds = stats.window_step_max = stats.window_publish_seconds = 0.0
         stats.window_slipped = stats.window_refused = 0
+        stats.window_max_strain = 0.0
         stats.window_dropped = dropped
 
     # -------------------------------------------------------------------------- shutdown

@@ -48,6 +48,7 @@ class NodeSettings:
     markers_rate: float
     diagnostics_rate: float
     max_catchup_frames: int
+    strain_warning: float
     publish_clock: bool
     max_real_time_factor: float
     material: str
@@ -97,6 +98,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'the clock; beyond that the simulation slips (real-time factor < 1, reported '
                   'in diagnostics). Publishing is what is dropped first, never physics frames.',
                   (1, 1000)),
+    ParameterSpec('strain_warning', 0.02, '/diagnostics warns while the sheet\'s largest HINGE '
+                  'strain |l/l0 - 1| over its window exceeds this: paper stretches well under '
+                  '1 %, so beyond it the simulation no longer keeps the sheet paper (fingertips '
+                  'pushing it together on the table, docs/contact.md); 0: never.', (0.0, 100.0)),
     ParameterSpec('publish_clock', False, 'The simulation is the clock: it steps as fast as '
                   'it can (up to max_real_time_factor), never slips, and publishes its time on '
                   '/clock after every frame, from 0, for nodes run with use_sim_time:=true '
@@ -434,6 +439,7 @@ def settings_from_values(values: Mapping[str, Any]) -> NodeSettings:
         markers_rate=_rate(values, 'markers_rate'),
         diagnostics_rate=_rate(values, 'diagnostics_rate'),
         max_catchup_frames=int(values['max_catchup_frames']),
+        strain_warning=float(values['strain_warning']),
         publish_clock=bool(values['publish_clock']),
         max_real_time_factor=_rate(values, 'max_real_time_factor'),
         material=material,

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
@@ -424,6 +424,37 @@ def test_crumple_service_answers(sim):
     since = time.monotonic()
     sim.spin_for(1.0)
     assert_finite_outputs(sim, since)
+
+
+def _report_since(client, since: float, timeout: float = 5.0):
+    """The first /diagnostics status that came after ``since`` (a whole window later)."""
+    client.spin_until(lambda: len(client.messages('/diagnostics', since)) >= 2, timeout,
+                      'two diagnostics reports', client.process)
+    status = client.messages('/diagnostics', since)[1].status[0]
+    return status, {pair.key: pair.value for pair in status.values}
+
+
+def test_diagnostics_report_the_strain_and_warn_beyond_strain_warning(sim):
+    """The diagnostics carry the largest HINGE strain of their window and of the run, and
+    warn while the window's exceeds ``strain_warning``: a user sees when the sheet is no
+    longer paper. A crumpled sheet's creases strain it; at a threshold below that, WARN
+    with the figure; switched off (0), no warning for it."""
+    reset(sim)
+    assert set_parameters(sim, strain_warning=1e-9)[0].successful
+    try:
+        assert sim.call(Trigger, 'paper/crumple', Trigger.Request()).success
+        status, values = _report_since(sim, time.monotonic())
+        window, run = float(values['max_strain']), float(values['max_strain_run'])
+        assert 1e-9 < window <= run < 10.0, values
+        assert status.level == DiagnosticStatus.WARN, (status.level, status.message)
+        assert re.search(r'sheet strained \d+\.\d% \(beyond strain_warning 0\.0%\)',
+                         status.message), status.message
+        assert set_parameters(sim, strain_warning=0.0)[0].successful
+        status, values = _report_since(sim, time.monotonic())
+        assert 'strained' not in status.message, status.message
+        assert float(values['max_strain_run']) >= run
+    finally:
+        assert set_parameters(sim, strain_warning=0.02)[0].successful
 
 
 # ----------------------------------------------------------------------- material, looks
