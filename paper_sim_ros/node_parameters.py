@@ -203,8 +203,12 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'back in about a frame, faster than one sub-step follows (docs/contact.md).',
                   (1, 64)),
     ParameterSpec('solver.release_time', _SOLVER.release_time,
-                  'How long [s] the sub-steps of release_substeps last after a let-go.',
-                  (0.0, 60.0)),
+                  'How long [s] the sub-steps of release_substeps (or give_substeps) last '
+                  'after a let-go.', (0.0, 60.0)),
+    ParameterSpec('solver.give_substeps', _SOLVER.give_substeps,
+                  'Sub-steps a frame, times substeps, for release_time after a fingertip\'s '
+                  'grip gives (contact.grip_give; 1: never more): the paper it held under load '
+                  'springs back at once.', (1, 64)),
     ParameterSpec('solver.sleep_speed', _SOLVER.sleep_speed,
                   'A sheet whose every vertex moved slower than this [m/s] on average over '
                   'sleep_time, and moves slower now, nothing near it changing, sleeps: it '
@@ -219,6 +223,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('contact.probe_friction', _CONTACT.probe_friction,
                   "Friction coefficient of the probes (above the table's, a probe pressed "
                   'into the table grips the paper).', (0.0, 10.0)),
+    ParameterSpec('contact.grip_give', _CONTACT.grip_give,
+                  'A fingertip\'s grip lets go where the paper behind it, along its motion, '
+                  'is stretched beyond this (0: never): paper held elsewhere (a pin, another '
+                  'fingertip) slips from under a fingertip before it stretches.', (0.0, 10.0)),
     ParameterSpec('contact.max_probe_distance', 10.0, 'Probe poses farther than this from the '
                   "origin of frame_id are refused as absurd [m].", (0.01, 1.0e6)),
     ParameterSpec('pin_mode', 'none', f'Pinned vertices, one of {", ".join(PIN_MODES)} '

@@ -89,6 +89,8 @@ def test_one_radius_serves_every_probe():
     ({'solver.method': 'magic'}, 'method'),
     ({'sheet.nx': 2}, 'nx'),
     ({'contact.ground_friction': -1.0}, 'ground_friction'),
+    ({'contact.grip_give': float('inf')}, 'grip_give'),
+    ({'solver.give_substeps': 0}, 'give_substeps'),
     ({'publish_rate': float('nan')}, 'publish_rate'),
     ({'material': 'papyrus'}, "unknown material 'papyrus'"),
     ({'appearance.light_direction': [0.0, 0.0, 0.0]}, 'light_direction'),

@@ -591,6 +591,39 @@ def grip_pinched(positions, inverse_mass, probe_center, probe_radius, pressing, 
 
 
 @njit(cache=True)
+def stretched_behind(positions, ends, rest_length, centre, reach, direction, give, alignment):
+    """Whether a spring with an end within ``reach`` [m] of ``centre`` is stretched beyond
+    ``give`` (l > (1 + give) l0) behind it (its midpoint on the far side of the plane
+    through ``centre`` across the unit ``direction``) and runs along ``direction`` (|cos|
+    at least ``alignment``): paper pulled back from a fingertip moving that way."""
+    reach_squared = reach * reach
+    for s in range(ends.shape[0]):
+        i = ends[s, 0]
+        j = ends[s, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        dz = positions[j, 2] - positions[i, 2]
+        length_squared = dx * dx + dy * dy + dz * dz
+        limit = (1.0 + give) * rest_length[s]
+        if length_squared <= limit * limit:
+            continue
+        near = False
+        behind = 0.0
+        for end in (i, j):
+            ex = positions[end, 0] - centre[0]
+            ey = positions[end, 1] - centre[1]
+            ez = positions[end, 2] - centre[2]
+            near = near or ex * ex + ey * ey + ez * ez < reach_squared
+            behind += ex * direction[0] + ey * direction[1] + ez * direction[2]
+        if not near or behind >= 0.0:
+            continue
+        along = dx * direction[0] + dy * direction[1] + dz * direction[2]
+        if abs(along) >= alignment * np.sqrt(length_squared):
+            return True
+    return False
+
+
+@njit(cache=True)
 def hold_gripped(positions, probe_center, pressing, grip_probe, grip_offset, ground_height):
     """Release the vertices of probes no longer pressing; carry the others along the table
     with their probe (at their gripped offset), pinched on it."""

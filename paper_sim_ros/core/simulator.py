@@ -71,6 +71,14 @@ RESTORE_FLOOR = 1e-12
 """Kinetic energy [J] below which there is no motion to scale (a sheet at rest)."""
 FAST_PROBE_TRAVEL = 0.25
 """A probe moving more than this many radii in a sub-step carries what it touches."""
+GIVE_REACH = 1.5
+"""A fingertip's grip gives for the paper within this many of its radii (plus an edge) of
+its centre (``ContactConfig.grip_give``)."""
+GIVE_ALIGNMENT = 0.5
+"""... for springs behind it that run along its motion at least this much (the cosine of
+their angle with it): paper pulled back. The paper beside a squeeze's fingertips, pushed
+out sideways between their pads and the table, is stretched as much (10-14 % at 49²-65²);
+its grips must hold, or the arch loses its push."""
 SMALL_PROBE_EDGES = 0.6
 """A probe whose radius is below this many of the mesh's longest edges can pass between a
 triangle's corners (a right triangle's circumradius is half its longest edge): the
@@ -146,6 +154,13 @@ class Simulator:
         self._release_grips()
         self._release_frames = 0
         """Frames left of the sub-steps that follow a let-go (``release_substeps``)."""
+        self._release_multiple = 1
+        """The multiple of ``substeps`` those frames run (``release_substeps`` after a
+        let-go, ``give_substeps`` after a grip gave: the larger, where both came)."""
+        self._gave = False
+        """Whether a grip gave in this frame (_give_grips)."""
+        self._stepping_substeps: int | None = None
+        """While a frame is stepped, its sub-steps (finer from a give on); None between."""
         self._sliding = np.zeros(0, dtype=bool)
         """Per probe: it slid over the paper (_slip_grips) and grips nothing new until it
         lifts off the table."""
@@ -467,9 +482,9 @@ class Simulator:
             self._end_frame()
             return
         substeps = self.frame_substeps
-        h = solver.dt / substeps
         releasing = solver.release_substeps > 1 and solver.method == 'constrained'
         gripping = self._gripping_probes() if releasing else None
+        self._gave = False
         saved_positions = self.sheet.positions.copy()
         self._air_taken = 0.0
         """The kinetic energy the air's drag across the sheet took this frame [J]."""
@@ -481,10 +496,24 @@ class Simulator:
             changes_before = (self.breaks, self.folds, len(self.damage.creases))
         # sub-steps, the probes sweeping a share of their frame's path in each
         probe_path = self.probes.end - self.probes.start
-        for sub in range(substeps):
-            probe_from = self.probes.start + probe_path * (sub / substeps)
-            probe_to = self.probes.start + probe_path * ((sub + 1) / substeps)
-            self._substep(h, probe_from, probe_to)
+        sub = 0
+        refined = solver.give_substeps == 1
+        self._stepping_substeps = substeps
+        try:
+            while sub < substeps:
+                probe_from = self.probes.start + probe_path * (sub / substeps)
+                probe_to = self.probes.start + probe_path * ((sub + 1) / substeps)
+                self._substep(solver.dt / substeps, probe_from, probe_to)
+                sub += 1
+                if self._gave and not refined and sub < substeps:
+                    # a grip gave under load: the rest of the frame in finer sub-steps too
+                    refined = True
+                    sub, substeps = sub * solver.give_substeps, substeps * solver.give_substeps
+                    self._stepping_substeps = substeps
+                    self._start_release(solver.give_substeps)
+                    self._factor_global_steps()
+        finally:
+            self._stepping_substeps = None
         # nothing non-finite escapes: such a frame is rolled back
         rolled_back = not (kernels.all_finite(self.sheet.positions)
                            and kernels.all_finite(self.sheet.velocities))
@@ -521,7 +550,7 @@ class Simulator:
                               != changes_before):
             self._restore_energy(energy_before - 2.0 * solver.air_damping * solver.dt
                                  * kinetic_before - self._air_taken)
-        if releasing:
+        if releasing or self._release_frames or self._gave:
             self._time_release(gripping)
         self._count_still_frame(not (rolled_back or yielded or mesh_changed
                                      or self._bending_step is not None
@@ -541,27 +570,42 @@ class Simulator:
     def frame_substeps(self) -> int:
         """Sub-steps of a frame now: ``substeps``, times ``release_substeps`` for
         ``release_time`` after a fingertip let go of the sheet."""
-        solver = self.config.solver
-        return solver.substeps * (solver.release_substeps if self._release_frames else 1)
+        if self._stepping_substeps is not None:
+            return self._stepping_substeps  # a frame being stepped: its sub-steps now
+        return self.config.solver.substeps * (self._release_multiple if self._release_frames
+                                              else 1)
 
     def _gripping_probes(self) -> np.ndarray:
         """The probes that grip the sheet now (indices)."""
         gripped = self._grip_probe[self._grip_probe >= 0]
         return np.unique(gripped) if gripped.size else gripped
 
-    def _time_release(self, gripping: np.ndarray) -> None:
+    def _time_release(self, gripping: np.ndarray | None) -> None:
         """Count down the sub-steps that follow a let-go, start them where a probe that
-        gripped the sheet as the frame began (``gripping``) grips none of it now, and factor
-        the systems for the sub-step length that comes of it. A squeezed arch set free
-        springs back in about a frame, faster than one sub-step can follow
-        (``release_substeps``)."""
+        gripped the sheet as the frame began (``gripping``, None: not watched) grips none
+        of it now (``release_substeps``) or a grip gave (``give_substeps``), and factor the
+        systems for the sub-step length that comes of it. A squeezed arch set free, or
+        paper a grip held under load, springs back in about a frame, faster than one
+        sub-step can follow."""
         solver = self.config.solver
-        if self._release_frames:
+        if self._release_frames and not self._gave:  # a give started them in this frame
             self._release_frames -= 1
-        if gripping.size and np.setdiff1d(gripping, self._gripping_probes()).size:
-            self._release_frames = math.ceil(solver.release_time / solver.dt - 1e-9)
+        if not self._release_frames:
+            self._release_multiple = 1
+        if gripping is not None and gripping.size \
+                and np.setdiff1d(gripping, self._gripping_probes()).size:
+            self._start_release(solver.release_substeps)
+        if self._gave:
+            self._start_release(solver.give_substeps)
         if self._global_step is not None and self._factored_settings != self._system_settings():
             self._factor_global_steps()
+
+    def _start_release(self, multiple: int) -> None:
+        """``release_time`` of frames at ``multiple`` × ``substeps`` from the next frame."""
+        if multiple > 1:
+            solver = self.config.solver
+            self._release_frames = math.ceil(solver.release_time / solver.dt - 1e-9)
+            self._release_multiple = max(self._release_multiple, multiple)
 
     # ----------------------------------------------------------------------- sleeping
     def _count_still_frame(self, calm: bool) -> None:
@@ -856,6 +900,8 @@ class Simulator:
         # velocities from the positions actually reached
         velocities[:] = (positions - start_positions) / h
         velocities[sheet.pinned] = 0.0
+        if constrained and contact.grip_give > 0:
+            self._give_grips(positions, probe_from, probe_to)
         if constrained and spin_kept and spin_kept == self._spin_kept():
             self._keep_angular_momentum(momentum * (1.0 - h * self.config.solver.air_damping),
                                         h, spin_kept == SPIN_VERTICAL)
@@ -1484,11 +1530,41 @@ class Simulator:
         # all of it slides, and it grips nothing new (gripping what came under its leading
         # edge, each vertex dragged until it too was beyond reach, it sheared a pinned
         # sheet by 31 %: random pinned scene 9)
-        sliding = np.unique(probe[letting_go])
-        self._sliding[sliding] = True
-        slipped = gripped[letting_go | np.isin(probe, sliding)]
+        self._slide(np.unique(probe[letting_go]))
+
+    def _slide(self, probes: np.ndarray) -> None:
+        """These probes' grips let go of all they hold: they slide (``_sliding``)."""
+        if probes.size == 0:
+            return
+        self._sliding[probes] = True
+        slipped = np.flatnonzero(np.isin(self._grip_probe, probes) & (self._grip_probe >= 0))
         self._grip_probe[slipped] = -1
         self._slipping[slipped] = True
+
+    def _give_grips(self, positions, probe_from, probe_to) -> None:
+        """A moving fingertip's grip gives where the paper behind it, along its motion,
+        is stretched beyond ``grip_give`` (ContactConfig: paper held elsewhere slips from
+        under a fingertip long before it stretches); the let-go is under load, so the
+        frames after it run ``give_substeps``."""
+        gripped = self._grip_probe[self._grip_probe >= 0]
+        if gripped.size == 0:
+            return
+        give = self.config.contact.grip_give
+        giving = []
+        for probe in np.unique(gripped):
+            motion = probe_to[probe] - probe_from[probe]
+            travel = math.hypot(motion[0], motion[1])
+            if travel == 0.0:
+                continue  # a fingertip standing still has no behind
+            direction = np.array([motion[0] / travel, motion[1] / travel, 0.0])
+            reach = GIVE_REACH * self.probes.radius[probe] + self._longest_edge
+            if kernels.stretched_behind(positions, self._held_ends, self._held_rest,
+                                        probe_to[probe], reach, direction, give,
+                                        GIVE_ALIGNMENT):
+                giving.append(probe)
+        if giving:
+            self._slide(np.asarray(giving))
+            self._gave = True
 
     def _factor_grips(self) -> None:
         """Where a probe grips more vertices than GRIP_ROWS_MOST rows can hold, factor the
