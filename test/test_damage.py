@@ -31,11 +31,14 @@ def exact_mass(sheet) -> float:
 
 def squeeze_mapping(grid: int = 33, membrane: bool = True, **damage) -> dict:
     """The squeeze at ``grid``² with ``damage`` settings; without ``membrane`` the squeezed
-    sheet is crushed, as built before the membrane (it then breaks and folds far more)."""
+    sheet is crushed, as built before the membrane (it then breaks and folds far more), and
+    its fingertips hold it however the paper behind them stretches (``grip_give`` 0: the
+    crushed sheet stretched there, and they let go before it broke)."""
     mapping = with_overrides(builtin_mapping('squeeze'), grid=grid)
     mapping['damage'] = damage
     if not membrane:
         mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight': 0.0}
+        mapping['contact'] = {**(mapping.get('contact') or {}), 'grip_give': 0.0}
     return mapping
 
 

@@ -305,13 +305,14 @@ def _shearing_fingertip(grip_give: float) -> tuple[dict, list[int], bool]:
 
 def test_a_grip_gives_where_the_paper_behind_it_stretches():
     """`contact.grip_give`: a fingertip shearing a pinned sheet lets go once the paper
-    behind it is stretched 10 % (without the give: 43 %, the sheet folding), slides over
-    it, and the frames after that let-go under load run `give_substeps` (4) for
-    `release_time`. Then the largest strain stays near the give (11.4 %)."""
+    behind it has been stretched 10 % for GIVE_PERSISTENCE sub-steps (without the give:
+    43 %, the sheet folding), slides over it, and the frames after that let-go under load
+    run `give_substeps` (4) for `release_time`. Then the largest strain stays near the
+    give (14.1 %)."""
     held, _, _ = _shearing_fingertip(0.0)
     assert held['max_strain'] > 0.3, held
     given, sub_steps, slid = _shearing_fingertip(0.1)
-    assert slid and given['max_strain'] < 0.14, given
+    assert slid and given['max_strain'] < 0.17, given
     finer = np.flatnonzero(np.array(sub_steps) == 4)
     assert finer.size == 15 and np.all(np.diff(finer) == 1), finer
     assert given['mesh_valid'] and given['finite'] and given['mass'] == pytest.approx(1.0)

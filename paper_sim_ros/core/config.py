@@ -170,8 +170,8 @@ class SolverConfig:
     """('constrained') Sub-steps a frame, as a multiple of ``substeps``, for ``release_time``
     after a fingertip's grip gives (``ContactConfig.grip_give``; 1: never more). That
     let-go is under load: the paper it held springs back at once, so they start in the
-    very sub-step after the give (random pinned scene 8405: 107 % over the run with one
-    sub-step, 11.9 % with four; docs/contact.md, "A grip gives where the paper behind it
+    very sub-step after the give (random pinned scene 8405: 29.9 % over the run with one
+    sub-step, 12.1 % with four; docs/contact.md, "A grip gives where the paper behind it
     stretches")."""
     energy_restoring: bool = False
     """('constrained') After a frame in which nothing but gravity, air and the pins acted
@@ -243,7 +243,8 @@ class ContactConfig:
     """Probe centres farther than this from the origin [m] are refused as absurd."""
     grip_give: float = 0.1
     """A fingertip's grip lets go where the paper behind it (along its motion, within
-    GIVE_REACH radii of it) is stretched beyond this (0: never): paper held elsewhere (a
+    GIVE_REACH radii of it) has been stretched beyond this for GIVE_PERSISTENCE sub-steps
+    (0: never): paper held elsewhere (a
     pin, another fingertip, the table) slips from under a fingertip long before it
     stretches. The grips' reach checks (Simulator._slip_grips) catch a fingertip moving
     away from what holds the paper, not one that shears it: random pinned scene 8405

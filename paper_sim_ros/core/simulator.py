@@ -74,6 +74,16 @@ FAST_PROBE_TRAVEL = 0.25
 GIVE_REACH = 1.5
 """A fingertip's grip gives for the paper within this many of its radii (plus an edge) of
 its centre (``ContactConfig.grip_give``)."""
+GIVE_PERSISTENCE = 8
+"""... for that many sub-steps in a row: paper held elsewhere pulls on while the fingertip
+moves (the random scenes' gives: 22-203 sub-steps), where a fingertip pushing a pinned
+sheet towards its pin drags the paper behind it out only while it sets off (3-7 sub-steps
+over 10 %, up to 23 %; `bench/push_to_pin.py`: with 1 or 4 in a row its grip gave at 37²
+and 49² and the sheet never arched)."""
+GIVE_STILL = 1e-6
+"""A fingertip moving less than this [m] in a sub-step stands still: its grip does not give
+(a node's probe placed between equal poses may differ from one sub-step to the next by a
+rounding)."""
 GIVE_ALIGNMENT = 0.5
 """... for springs behind it that run along its motion at least this much (the cosine of
 their angle with it): paper pulled back. The paper beside a squeeze's fingertips, pushed
@@ -162,6 +172,9 @@ class Simulator:
         self._stepping_substeps: int | None = None
         """While a frame is stepped, its sub-steps (finer from a give on); None between."""
         self._sliding = np.zeros(0, dtype=bool)
+        self._stretched_behind = np.zeros(0, dtype=np.int64)
+        """Per probe: sub-steps in a row its grip has had paper stretched behind it
+        (_give_grips)."""
         """Per probe: it slid over the paper (_slip_grips) and grips nothing new until it
         lifts off the table."""
         self._grip_pinned = np.zeros(self.sheet.vertex_count, dtype=bool)
@@ -306,6 +319,7 @@ class Simulator:
         else:
             self._release_grips()
             self._sliding = np.zeros(len(centers), dtype=bool)
+            self._stretched_behind = np.zeros(len(centers), dtype=np.int64)
         self.probes = Probes(radius=radii.copy(), start=start, end=centers.copy(),
                              active=active.copy())
 
@@ -1543,27 +1557,28 @@ class Simulator:
 
     def _give_grips(self, positions, probe_from, probe_to) -> None:
         """A moving fingertip's grip gives where the paper behind it, along its motion,
-        is stretched beyond ``grip_give`` (ContactConfig: paper held elsewhere slips from
-        under a fingertip long before it stretches); the let-go is under load, so the
-        frames after it run ``give_substeps``."""
+        has been stretched beyond ``grip_give`` for GIVE_PERSISTENCE sub-steps in a row
+        (ContactConfig: paper held elsewhere slips from under a fingertip long before it
+        stretches); the let-go is under load, so the frames after it run
+        ``give_substeps``."""
         gripped = self._grip_probe[self._grip_probe >= 0]
-        if gripped.size == 0:
-            return
+        stretched = np.zeros(self.probes.count, dtype=bool)
         give = self.config.contact.grip_give
-        giving = []
         for probe in np.unique(gripped):
             motion = probe_to[probe] - probe_from[probe]
             travel = math.hypot(motion[0], motion[1])
-            if travel == 0.0:
+            if travel <= GIVE_STILL:
                 continue  # a fingertip standing still has no behind
             direction = np.array([motion[0] / travel, motion[1] / travel, 0.0])
             reach = GIVE_REACH * self.probes.radius[probe] + self._longest_edge
-            if kernels.stretched_behind(positions, self._held_ends, self._held_rest,
-                                        probe_to[probe], reach, direction, give,
-                                        GIVE_ALIGNMENT):
-                giving.append(probe)
-        if giving:
-            self._slide(np.asarray(giving))
+            stretched[probe] = kernels.stretched_behind(
+                positions, self._held_ends, self._held_rest, probe_to[probe], reach,
+                direction, give, GIVE_ALIGNMENT)
+        self._stretched_behind = np.where(stretched, self._stretched_behind + 1, 0)
+        giving = np.flatnonzero(self._stretched_behind >= GIVE_PERSISTENCE)
+        if giving.size:
+            self._stretched_behind[giving] = 0
+            self._slide(giving)
             self._gave = True
 
     def _factor_grips(self) -> None:
