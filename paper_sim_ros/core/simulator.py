@@ -172,11 +172,11 @@ class Simulator:
         self._stepping_substeps: int | None = None
         """While a frame is stepped, its sub-steps (finer from a give on); None between."""
         self._sliding = np.zeros(0, dtype=bool)
+        """Per probe: it slid over the paper (_slip_grips) and grips nothing new until it
+        lifts off the table."""
         self._stretched_behind = np.zeros(0, dtype=np.int64)
         """Per probe: sub-steps in a row its grip has had paper stretched behind it
         (_give_grips)."""
-        """Per probe: it slid over the paper (_slip_grips) and grips nothing new until it
-        lifts off the table."""
         self._grip_pinned = np.zeros(self.sheet.vertex_count, dtype=bool)
         """The vertices the factored systems hold as pins because a probe grips them
         (_factor_grips): kept when the grips are let go, until the systems are factored
@@ -1551,7 +1551,7 @@ class Simulator:
         if probes.size == 0:
             return
         self._sliding[probes] = True
-        slipped = np.flatnonzero(np.isin(self._grip_probe, probes) & (self._grip_probe >= 0))
+        slipped = np.flatnonzero(np.isin(self._grip_probe, probes))
         self._grip_probe[slipped] = -1
         self._slipping[slipped] = True
 
@@ -1562,6 +1562,9 @@ class Simulator:
         stretches); the let-go is under load, so the frames after it run
         ``give_substeps``."""
         gripped = self._grip_probe[self._grip_probe >= 0]
+        if gripped.size == 0:  # most sub-steps: nothing to give, no count runs on
+            self._stretched_behind[:] = 0
+            return
         stretched = np.zeros(self.probes.count, dtype=bool)
         give = self.config.contact.grip_give
         for probe in np.unique(gripped):
