@@ -3,6 +3,10 @@ relative to the nearest probe.
 
     .venv/bin/python bench/strain_where.py squeeze [--grid 65] [--seed 0] [--substeps 4]
         [--every 6] [--membrane 30]
+    .venv/bin/python bench/strain_where.py poke:12053 [--every 6]
+
+The scenario is a built-in one or a run of bench/random_scenes.py as ``family:index`` (its
+own grid, seed and sub-steps unless given).
 
 Each line: simulated time, the worst spring's strain (signed), how many springs are beyond
 2 %, the nearest active probe, the spring's midpoint relative to that probe's centre (x, y)
@@ -13,11 +17,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 
 os.environ.setdefault('NUMBA_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import random_scenes  # noqa: E402
 from paper_sim_ros.core import build_simulator, load_scenario  # noqa: E402
 from paper_sim_ros.core.scenarios import builtin_mapping, with_overrides  # noqa: E402
 from paper_sim_ros.core.sheet import HINGE  # noqa: E402
@@ -26,8 +34,8 @@ from paper_sim_ros.core.sheet import HINGE  # noqa: E402
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('scenario')
-    parser.add_argument('--grid', type=int, default=65)
-    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--grid', type=int, default=None, help='vertices a side (default 65)')
+    parser.add_argument('--seed', type=int, default=None, help='(default 0)')
     parser.add_argument('--substeps', type=int, default=None,
                         help="sub-steps per frame (default: the scenario's own)")
     parser.add_argument('--every', type=int, default=6, help='frames between lines')
@@ -35,8 +43,14 @@ def main() -> None:
                         help="the membrane at this weight in every sub-step (membrane_scope "
                         "'always'; 0: none; default: the solver's)")
     arguments = parser.parse_args()
-    mapping = with_overrides(builtin_mapping(arguments.scenario), grid=arguments.grid,
-                             seed=arguments.seed, substeps=arguments.substeps)
+    if ':' in arguments.scenario:  # a random scene: its own settings unless given
+        family, index = arguments.scenario.split(':')
+        mapping = with_overrides(random_scenes.scene(family, int(index)), grid=arguments.grid,
+                                 seed=arguments.seed, substeps=arguments.substeps)
+    else:
+        mapping = with_overrides(builtin_mapping(arguments.scenario),
+                                 grid=arguments.grid or 65, seed=arguments.seed or 0,
+                                 substeps=arguments.substeps)
     if arguments.membrane is not None:
         mapping['solver'] = {**(mapping.get('solver') or {}), 'membrane_weight':
                              arguments.membrane, 'membrane_scope': 'always'}

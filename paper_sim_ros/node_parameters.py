@@ -209,6 +209,11 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'Sub-steps a frame, times substeps, for release_time after a fingertip\'s '
                   'grip gives (contact.grip_give; 1: never more): the paper it held under load '
                   'springs back at once.', (1, 64)),
+    ParameterSpec('solver.squeeze_step_ratio', _SOLVER.squeeze_step_ratio,
+                  'While fingertips pinching the sheet on the table push it together, a '
+                  'sub-step lasts at most this many bending periods of a grid cell (the '
+                  'frames then run as many times substeps as that takes; 0: never more): '
+                  'longer, a squeeze on fine cells tangles (docs/contact.md).', (0.0, 1e6)),
     ParameterSpec('solver.sleep_speed', _SOLVER.sleep_speed,
                   'A sheet whose every vertex moved slower than this [m/s] on average over '
                   'sleep_time, and moves slower now, nothing near it changing, sleeps: it '

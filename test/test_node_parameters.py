@@ -91,6 +91,7 @@ def test_one_radius_serves_every_probe():
     ({'contact.ground_friction': -1.0}, 'ground_friction'),
     ({'contact.grip_give': float('inf')}, 'grip_give'),
     ({'solver.give_substeps': 0}, 'give_substeps'),
+    ({'solver.squeeze_step_ratio': -1.0}, 'squeeze_step_ratio'),
     ({'publish_rate': float('nan')}, 'publish_rate'),
     ({'material': 'papyrus'}, "unknown material 'papyrus'"),
     ({'appearance.light_direction': [0.0, 0.0, 0.0]}, 'light_direction'),

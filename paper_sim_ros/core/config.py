@@ -173,6 +173,18 @@ class SolverConfig:
     very sub-step after the give (random pinned scene 8405: 29.9 % over the run with one
     sub-step, 12.1 % with four; docs/contact.md, "A grip gives where the paper behind it
     stretches")."""
+    squeeze_step_ratio: float = 125.0
+    """('constrained') While a fingertip that pinches the sheet on the table pushes it
+    together (a held spring squeezed beyond ``buckling_compression`` after a sub-step), a
+    sub-step lasts at most this many times the bending period of a grid cell, l² √(ρ_A / B)
+    (l the shorter cell side, ρ_A the grammage, B the bending rigidity): from that sub-step
+    on, frames run as many times ``substeps`` as that takes, for as long as a fingertip
+    grips the sheet and ``release_time`` after (0: never more). A longer step than that
+    tangles the squeezed sheet: the split step carries the sheet's mesh-scale bending modes
+    the less faithfully the more of their periods a step spans. A4 printer paper needs none
+    of it up to 65 × 65 vertices at 60 Hz (the default scene, 110 periods a step); at 97²,
+    2 sub-steps, at 129², 4; cardboard at 65², 3 (docs/contact.md, "Sub-steps a squeeze
+    needs")."""
     energy_restoring: bool = False
     """('constrained') After a frame in which nothing but gravity, air and the pins acted
     and nothing yielded or broke, give back the energy the step lost beyond air drag by
@@ -204,6 +216,8 @@ class SolverConfig:
         _require(self.substeps >= 1, 'substeps must be >= 1')
         _require(self.release_substeps >= 1, 'release_substeps must be >= 1')
         _require(self.give_substeps >= 1, 'give_substeps must be >= 1')
+        _require(math.isfinite(self.squeeze_step_ratio) and self.squeeze_step_ratio >= 0,
+                 f'squeeze_step_ratio must be finite and >= 0, got {self.squeeze_step_ratio!r}')
         _require(math.isfinite(self.release_time) and 0 <= self.release_time <= 60,
                  f'release_time must be in [0, 60] s, got {self.release_time!r}')
         for name in ('max_stretch', 'max_compression', 'gripped_max_compression'):

@@ -134,6 +134,10 @@ first of them (SheetBending.yield_to): each drop changes the bending system (dro
 once, each change factorised anew: `crumple` at 65² ran at 1.15× real time;
 docs/solver.md)."""
 
+SQUEEZE_MULTIPLE_MOST = 8
+"""The squeeze's sub-steps (``squeeze_step_ratio``) are at most this multiple of
+``substeps``: cardboard at 129² would ask for 10, and run at a fiftieth of real time."""
+
 CONTACT_TOLERANCE = 1e-5
 """Depth inside a probe [m] at which a vertex without a contact row gets one."""
 DEEP_IN_RISING_PROBE = 0.1
@@ -166,9 +170,11 @@ class Simulator:
         """Frames left of the sub-steps that follow a let-go (``release_substeps``)."""
         self._release_multiple = 1
         """The multiple of ``substeps`` those frames run (``release_substeps`` after a
-        let-go, ``give_substeps`` after a grip gave: the larger, where both came)."""
-        self._gave = False
-        """Whether a grip gave in this frame (_give_grips)."""
+        let-go, ``give_substeps`` after a grip gave, the squeeze's (_keep_squeeze_steps)
+        while a fingertip pushes the sheet together: the largest, where several came)."""
+        self._refine = 1
+        """The multiple of ``substeps`` asked for in this frame from a sub-step on (a grip
+        gave, a fingertip pushes the sheet together; 1: none)."""
         self._stepping_substeps: int | None = None
         """While a frame is stepped, its sub-steps (finer from a give on); None between."""
         self._sliding = np.zeros(0, dtype=bool)
@@ -334,6 +340,8 @@ class Simulator:
             else 0.0
         """The longest triangle edge at rest [m]: how small a probe may pass between
         vertices (SMALL_PROBE_EDGES)."""
+        self._squeeze_multiple = squeeze_multiple(self.config)
+        """The multiple of ``substeps`` a squeeze runs (_keep_squeeze_steps)."""
         # a fold changes a few terms of each system, known without assembling them (not
         # when vertices were added, or the systems' settings changed)
         known_change = sheet.vertex_count == self._grip_probe.shape[0] \
@@ -498,7 +506,7 @@ class Simulator:
         substeps = self.frame_substeps
         releasing = solver.release_substeps > 1 and solver.method == 'constrained'
         gripping = self._gripping_probes() if releasing else None
-        self._gave = False
+        self._refine = 1
         saved_positions = self.sheet.positions.copy()
         self._air_taken = 0.0
         """The kinetic energy the air's drag across the sheet took this frame [J]."""
@@ -511,7 +519,6 @@ class Simulator:
         # sub-steps, the probes sweeping a share of their frame's path in each
         probe_path = self.probes.end - self.probes.start
         sub = 0
-        refined = solver.give_substeps == 1
         self._stepping_substeps = substeps
         try:
             while sub < substeps:
@@ -519,12 +526,13 @@ class Simulator:
                 probe_to = self.probes.start + probe_path * ((sub + 1) / substeps)
                 self._substep(solver.dt / substeps, probe_from, probe_to)
                 sub += 1
-                if self._gave and not refined and sub < substeps:
-                    # a grip gave under load: the rest of the frame in finer sub-steps too
-                    refined = True
-                    sub, substeps = sub * solver.give_substeps, substeps * solver.give_substeps
+                finer = math.ceil(self._refine * solver.substeps / substeps)
+                if finer > 1 and sub < substeps:
+                    # a grip gave under load, or fingertips push the sheet together: the
+                    # rest of the frame in finer sub-steps too
+                    sub, substeps = sub * finer, substeps * finer
                     self._stepping_substeps = substeps
-                    self._start_release(solver.give_substeps)
+                    self._start_release(self._refine)
                     self._factor_global_steps()
         finally:
             self._stepping_substeps = None
@@ -564,7 +572,7 @@ class Simulator:
                               != changes_before):
             self._restore_energy(energy_before - 2.0 * solver.air_damping * solver.dt
                                  * kinetic_before - self._air_taken)
-        if releasing or self._release_frames or self._gave:
+        if releasing or self._release_frames or self._refine > 1:
             self._time_release(gripping)
         self._count_still_frame(not (rolled_back or yielded or mesh_changed
                                      or self._bending_step is not None
@@ -597,20 +605,19 @@ class Simulator:
     def _time_release(self, gripping: np.ndarray | None) -> None:
         """Count down the sub-steps that follow a let-go, start them where a probe that
         gripped the sheet as the frame began (``gripping``, None: not watched) grips none
-        of it now (``release_substeps``) or a grip gave (``give_substeps``), and factor the
-        systems for the sub-step length that comes of it. A squeezed arch set free, or
-        paper a grip held under load, springs back in about a frame, faster than one
-        sub-step can follow."""
+        of it now (``release_substeps``) or a sub-step asked for finer ones (``_refine``:
+        a grip gave, fingertips push the sheet together), and factor the systems for the
+        sub-step length that comes of it. A squeezed arch set free, or paper a grip held
+        under load, springs back in about a frame, faster than one sub-step can follow."""
         solver = self.config.solver
-        if self._release_frames and not self._gave:  # a give started them in this frame
+        if self._release_frames and self._refine == 1:  # else asked again in this frame
             self._release_frames -= 1
         if not self._release_frames:
             self._release_multiple = 1
         if gripping is not None and gripping.size \
                 and np.setdiff1d(gripping, self._gripping_probes()).size:
             self._start_release(solver.release_substeps)
-        if self._gave:
-            self._start_release(solver.give_substeps)
+        self._start_release(self._refine)
         if self._global_step is not None and self._factored_settings != self._system_settings():
             self._factor_global_steps()
 
@@ -916,6 +923,8 @@ class Simulator:
         velocities[sheet.pinned] = 0.0
         if constrained and contact.grip_give > 0:
             self._give_grips(positions, probe_from, probe_to)
+        if constrained:
+            self._keep_squeeze_steps(positions)
         if constrained and spin_kept and spin_kept == self._spin_kept():
             self._keep_angular_momentum(momentum * (1.0 - h * self.config.solver.air_damping),
                                         h, spin_kept == SPIN_VERTICAL)
@@ -1582,7 +1591,23 @@ class Simulator:
         if giving.size:
             self._stretched_behind[giving] = 0
             self._slide(giving)
-            self._gave = True
+            self._refine = max(self._refine, self.config.solver.give_substeps)
+
+    def _keep_squeeze_steps(self, positions) -> None:
+        """Sub-steps of at most ``squeeze_step_ratio`` cell bending periods (SolverConfig)
+        while fingertips push the sheet together: asked for from the sub-step after which
+        a fingertip grips the sheet and a held spring is squeezed beyond
+        ``buckling_compression``, then for as long as a fingertip grips it (switching
+        between sub-step lengths each time the squeeze eased for a sub-step, the sheet was
+        jolted into a tangle: `squeeze` at 65², two sub-steps, 76 % and 188 folds)."""
+        multiple = self._squeeze_multiple
+        if multiple == 1 or not np.any(self._grip_probe >= 0):
+            return
+        running = self._stepping_substeps is not None \
+            and self._stepping_substeps >= multiple * self.config.solver.substeps
+        if running or kernels.any_squeezed(positions, self._held_ends, self._held_rest,
+                                           self.config.solver.buckling_compression):
+            self._refine = max(self._refine, multiple)
 
     def _factor_grips(self) -> None:
         """Where a probe grips more vertices than GRIP_ROWS_MOST rows can hold, factor the
@@ -1699,6 +1724,20 @@ class Simulator:
         if not contact.ground_enabled:
             return 0.0
         return float(kernels.table_penetration(self.sheet.positions, contact.ground_height))
+
+
+def squeeze_multiple(config: SimulationConfig) -> int:
+    """The multiple of ``substeps`` that makes a sub-step at most ``squeeze_step_ratio``
+    bending periods l² √(ρ_A / B) of the sheet's grid cell (SolverConfig), at most
+    SQUEEZE_MULTIPLE_MOST; 1 where the ratio is 0."""
+    solver, sheet = config.solver, config.sheet
+    if solver.squeeze_step_ratio == 0.0:
+        return 1
+    cell = min(sheet.width / (sheet.nx - 1), sheet.height / (sheet.ny - 1))
+    period = cell * cell * math.sqrt(sheet.grammage / sheet.bending_rigidity)
+    periods = solver.dt / solver.substeps / period
+    return int(min(max(math.ceil(periods / solver.squeeze_step_ratio - 1e-9), 1),
+                   SQUEEZE_MULTIPLE_MOST))
 
 
 def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.ndarray:
