@@ -214,6 +214,10 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'sub-step lasts at most this many bending periods of a grid cell (the '
                   'frames then run as many times substeps as that takes; 0: never more): '
                   'longer, a squeeze on fine cells tangles (docs/contact.md).', (0.0, 1e6)),
+    ParameterSpec('solver.squeeze_substeps', _SOLVER.squeeze_substeps,
+                  'While fingertips push the sheet together, frames run at least this many '
+                  'times substeps (4: squeeze at 65² strains half as much, at half its speed, '
+                  'and its arch springs back when let go; docs/contact.md).', (1, 64)),
     ParameterSpec('solver.sleep_speed', _SOLVER.sleep_speed,
                   'A sheet whose every vertex moved slower than this [m/s] on average over '
                   'sleep_time, and moves slower now, nothing near it changing, sleeps: it '

@@ -323,7 +323,8 @@ def test_a_squeeze_steps_by_its_cells_bending_period():
     """`solver.squeeze_step_ratio` (125): a squeeze's sub-steps last at most that many
     bending periods l² √(ρ_A / B) of a grid cell. A4 printer paper needs one sub-step up to
     65² at 60 Hz (110 periods: the default scene as it was), two at 97², four at 129²;
-    cardboard, stiffer for its weight, three at 65²; 0 turns it off."""
+    cardboard, stiffer for its weight, three at 65²; 0 turns it off. At least
+    `solver.squeeze_substeps` (1) either way."""
     def multiple(grid, material=None, **solver):
         mapping = with_overrides(builtin_mapping('squeeze'), grid=grid, material=material)
         mapping['solver'] = solver
@@ -333,6 +334,8 @@ def test_a_squeeze_steps_by_its_cells_bending_period():
     assert multiple(65, 'cardboard') == 3 and multiple(97, 'banknote') == 2
     assert multiple(129, substeps=4) == 1 and multiple(129, squeeze_step_ratio=0.0) == 1
     assert multiple(513) == simulator_module.SQUEEZE_MULTIPLE_MOST
+    assert multiple(65, squeeze_substeps=4) == 4 and multiple(129, squeeze_substeps=3) == 4
+    assert multiple(65, squeeze_substeps=4, squeeze_step_ratio=0.0) == 4
 
 
 def _squeeze_on_fine_cells(squeeze_step_ratio: float | None

@@ -1727,17 +1727,18 @@ class Simulator:
 
 
 def squeeze_multiple(config: SimulationConfig) -> int:
-    """The multiple of ``substeps`` that makes a sub-step at most ``squeeze_step_ratio``
-    bending periods l² √(ρ_A / B) of the sheet's grid cell (SolverConfig), at most
-    SQUEEZE_MULTIPLE_MOST; 1 where the ratio is 0."""
+    """The multiple of ``substeps`` a squeeze's frames run (SolverConfig): at least
+    ``squeeze_substeps``, and as many as make a sub-step at most ``squeeze_step_ratio``
+    bending periods l² √(ρ_A / B) of the sheet's grid cell (none where the ratio is 0), at
+    most SQUEEZE_MULTIPLE_MOST."""
     solver, sheet = config.solver, config.sheet
     if solver.squeeze_step_ratio == 0.0:
-        return 1
+        return solver.squeeze_substeps
     cell = min(sheet.width / (sheet.nx - 1), sheet.height / (sheet.ny - 1))
     period = cell * cell * math.sqrt(sheet.grammage / sheet.bending_rigidity)
     periods = solver.dt / solver.substeps / period
-    return int(min(max(math.ceil(periods / solver.squeeze_step_ratio - 1e-9), 1),
-                   SQUEEZE_MULTIPLE_MOST))
+    return max(solver.squeeze_substeps,
+               min(math.ceil(periods / solver.squeeze_step_ratio - 1e-9), SQUEEZE_MULTIPLE_MOST))
 
 
 def pin_distance_levels(spring_vertices: np.ndarray, pinned: np.ndarray) -> np.ndarray:
