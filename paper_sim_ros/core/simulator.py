@@ -176,7 +176,8 @@ class Simulator:
         """The multiple of ``substeps`` asked for in this frame from a sub-step on (a grip
         gave, a fingertip pushes the sheet together; 1: none)."""
         self._stepping_substeps: int | None = None
-        """While a frame is stepped, its sub-steps (finer from a give on); None between."""
+        """While a frame is stepped, its sub-steps (finer from a give or a squeeze on); None
+        between."""
         self._sliding = np.zeros(0, dtype=bool)
         """Per probe: it slid over the paper (_slip_grips) and grips nothing new until it
         lifts off the table."""
