@@ -212,8 +212,9 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('solver.squeeze_step_ratio', _SOLVER.squeeze_step_ratio,
                   'While fingertips pinching the sheet on the table push it together, a '
                   'sub-step lasts at most this many bending periods of a grid cell (the '
-                  'frames then run as many times substeps as that takes; 0: never more): '
-                  'longer, a squeeze on fine cells tangles (docs/contact.md).', (0.0, 1e6)),
+                  'frames then run as many times substeps as that takes; 0: no bound from '
+                  'the cells, only squeeze_substeps): longer, a squeeze on fine cells '
+                  'tangles (docs/contact.md).', (0.0, 1e6)),
     ParameterSpec('solver.squeeze_substeps', _SOLVER.squeeze_substeps,
                   'While fingertips push the sheet together, frames run at least this many '
                   'times substeps (4: squeeze at 65² strains half as much, at half its speed, '

@@ -179,9 +179,10 @@ class SolverConfig:
     sub-step lasts at most this many times the bending period of a grid cell, l² √(ρ_A / B)
     (l the shorter cell side, ρ_A the grammage, B the bending rigidity): from that sub-step
     on, frames run as many times ``substeps`` as that takes, for as long as a fingertip
-    grips the sheet and ``release_time`` after (0: never more). A longer step than that
-    tangles the squeezed sheet: the split step carries the sheet's mesh-scale bending modes
-    the less faithfully the more of their periods a step spans. A4 printer paper needs none
+    grips the sheet and ``release_time`` after (0: no bound from the cells; then only
+    ``squeeze_substeps``). A longer step than that tangles the squeezed sheet: the split
+    step carries the sheet's mesh-scale bending modes the less faithfully the more of
+    their periods a step spans. A4 printer paper needs none
     of it up to 65 × 65 vertices at 60 Hz (the default scene, 110 periods a step); at 97²,
     2 sub-steps, at 129², 4; cardboard at 65², 3 (docs/contact.md, "Sub-steps a squeeze
     needs")."""
