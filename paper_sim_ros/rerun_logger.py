@@ -166,6 +166,17 @@ def _segments(positions: np.ndarray, ends: np.ndarray, strip_type):
     return pa.ListArray.from_arrays(offsets, inner, type=strip_type)
 
 
+def _blob(image: np.ndarray, buffer_type):
+    """``image``'s bytes as a Rerun blob, an arrow array over its own memory: the SDK's
+    ``Image`` and ``DepthImage`` copy an image twice on the way (0.3 → 1.3 ms at 640 × 480
+    once arrow's allocator returns freed memory at once, as import_rerun has it)."""
+    import pyarrow as pa  # installed with rerun-sdk (see import_rerun)
+
+    data = np.ascontiguousarray(image).reshape(-1).view(np.uint8)
+    return pa.ListArray.from_arrays(pa.array(np.array([0, data.size], dtype=np.int32)),
+                                    pa.array(data), type=buffer_type)
+
+
 def view_bounds(simulator) -> tuple[np.ndarray, np.ndarray]:
     """Corners (low, high) [m] of the box the 3-D view frames: the sheet as it starts, and,
     if it is pinned, as far below its pins as it is long (a pinned sheet swings down and
@@ -303,6 +314,7 @@ class RerunRecorder:
         self._stream = stream
         self._rr = rr
         self._strip_type = rr.components.LineStrip3D.arrow_type()
+        self._buffer_type = rr.components.ImageBuffer.arrow_type()
         info = dict(self.recording_info)
         info.setdefault('recorder', {
             'application_id': application_id,
@@ -377,8 +389,15 @@ class RerunRecorder:
             stream.log(entity, rr.Pinhole(image_from_camera=intrinsics(config),
                                           resolution=[config.width, config.height],
                                           camera_xyz=rr.ViewCoordinates.RDF))
-            stream.log(f'{entity}/depth', rr.DepthImage(frame.depth, meter=1.0))
-            stream.log(f'{entity}/rgb', rr.Image(frame.rgb))
+            height, width = frame.depth.shape
+            image_format = rr.components.ImageFormat
+            stream.log(f'{entity}/depth', rr.DepthImage.from_fields(
+                buffer=_blob(frame.depth, self._buffer_type), meter=1.0,
+                format=image_format(width=width, height=height, channel_datatype='F32')))
+            stream.log(f'{entity}/rgb', rr.Image.from_fields(
+                buffer=_blob(frame.rgb, self._buffer_type),
+                format=image_format(width=width, height=height, color_model='RGB',
+                                    channel_datatype='U8')))
 
     def log_inputs(self, sim_time: float, simulator) -> None:
         """Log only the probe inputs of a frame (for a caller that steps frames it does not

@@ -7,9 +7,9 @@ import pytest
 
 from paper_sim_ros.core import SheetConfig
 from paper_sim_ros.core.camera import (HIT_NOTHING, HIT_PAPER, HIT_PROBE, HIT_TABLE,
-                                       CameraConfig, back_project, camera_to_world, look_at,
-                                       project, projection_matrix, render,
-                                       world_to_camera)
+                                       PROBE_COLOR, CameraConfig, back_project,
+                                       camera_to_world, look_at, project, projection_matrix,
+                                       render, world_to_camera)
 from paper_sim_ros.core.sheet import build_flat_sheet
 
 AMPLITUDE = 0.01  # m
@@ -96,6 +96,43 @@ def test_probe_occludes_the_paper():
     assert np.all(frame.hit[ring] == HIT_PAPER)
     inactive = shoot(DOWN, sheet, probes=[(0.0, 0.0, 0.1)], radii=[0.02], active=[False])
     assert np.all(inactive.hit[block] == HIT_PAPER)
+
+
+def rays_meeting_probes(config, centres, radii):
+    """Per pixel, whether its ray meets one of the spheres ``centres`` (world) / ``radii``
+    in front of the near plane: the ray-sphere test over every pixel, in numpy."""
+    rows, columns = np.mgrid[0:config.height, 0:config.width].astype(float)
+    ray_x = (columns - config.principal_x) / config.focal_x
+    ray_y = (rows - config.principal_y) / config.focal_y
+    ray_squared = ray_x * ray_x + ray_y * ray_y + 1.0
+    met = np.zeros(rows.shape, bool)
+    for centre, radius in zip(world_to_camera(config, np.array(centres, float)), radii):
+        along = ray_x * centre[0] + ray_y * centre[1] + centre[2]
+        discriminant = along * along - ray_squared * (centre @ centre - radius ** 2)
+        root = np.sqrt(np.maximum(discriminant, 0.0))
+        far = (along + root) / ray_squared
+        met |= (discriminant >= 0) & (far > config.near)
+    return met
+
+
+@pytest.mark.parametrize('centres, radii', [
+    ([(0.0, 0.0, 0.05)], [0.01]),  # in the middle of the view
+    ([(0.17, -0.05, 0.02)], [0.03]),  # across the image's edge
+    ([(0.25, -0.3, 0.3)], [0.05]),  # around the camera: it fills the image
+    ([(0.2398, -0.2878, 0.2878)], [0.015]),  # across the near plane
+    ([(0.5, -0.6, 0.6)], [0.05]),  # behind the camera
+    ([(0.02, 0.02, 0.03), (0.03, 0.01, 0.05)], [0.02, 0.015]),  # overlapping
+], ids=['middle', 'edge', 'around', 'near plane', 'behind', 'two'])
+def test_a_probe_shows_exactly_where_rays_meet_it(centres, radii):
+    """The render casts rays at a probe only over the pixels its silhouette can cover:
+    every pixel whose ray meets it shows it, wherever it is about the camera."""
+    sheet = build_flat_sheet(SheetConfig(nx=9, ny=9))
+    sheet.positions[:, 2] -= 1.0  # out of the way, below the probes
+    frame = shoot(OBLIQUE, sheet, probes=centres, radii=radii, active=[True] * len(radii))
+    met = rays_meeting_probes(OBLIQUE, centres, radii)
+    assert np.array_equal(frame.hit == HIT_PROBE, met), np.sum((frame.hit == HIT_PROBE) != met)
+    assert np.all(np.isfinite(frame.depth[met]))
+    assert np.all(frame.rgb[met] == PROBE_COLOR)
 
 
 def folded_sheet(gap=0.005):

@@ -12,11 +12,12 @@ Rendering is two passes over flat arrays, both numba kernels:
   edge functions, perspective-correct barycentric weights). A triangle with any vertex at
   or behind the near plane (``CameraConfig.near``) is skipped whole, not clipped: the
   camera is meant to look at the sheet from outside it.
-- ``_shade_kernel``: per pixel, the ray is cast against the probes (spheres) and the
-  table (the infinite plane z = ``table_height``, seen from both sides) and the nearest
-  of paper, probe and table wins; the paper's depth, material coordinates, colour and
-  damage label are interpolated with the stored weights. Paper wins a tie with the table
-  within ``PAPER_OVER_TABLE`` (a sheet lying on the table shows, not the table).
+- ``_shade_kernel``: per pixel, the ray is cast against the table (the infinite plane
+  z = ``table_height``, seen from both sides) and the probes (spheres; each only over the
+  pixels its silhouette can cover) and the nearest of paper, probe and table wins; the
+  paper's depth, material coordinates, colour and damage label are interpolated with the
+  stored weights. Paper wins a tie with the table within ``PAPER_OVER_TABLE`` (a sheet
+  lying on the table shows, not the table).
 """
 from __future__ import annotations
 
@@ -336,52 +337,81 @@ def _raster_kernel(positions, triangles, rotation, translation, fx, fy, cx, cy, 
 
 
 @njit(cache=True)
+def _tangent_slopes(centre_x, centre_z, radius):
+    """The slopes m of the two lines x = m z through the optical centre that touch a sphere
+    seen in front of the camera (its section by the plane of x and z: the disk of
+    ``radius`` around (centre_x, centre_z), centre_z > radius): the range of x / z over it."""
+    reach = radius * math.sqrt(centre_x * centre_x + centre_z * centre_z - radius * radius)
+    depth_squared = centre_z * centre_z - radius * radius
+    return ((centre_x * centre_z - reach) / depth_squared,
+            (centre_x * centre_z + reach) / depth_squared)
+
+
+@njit(cache=True)
+def _probe_pixel_boxes(probe_centers, probe_radii, probe_active, fx, fy, cx, cy, near,
+                       height, width):
+    """Per probe, the rows and columns (first row, last row, first column, last column) that
+    can see it: its silhouette's bounds widened by a pixel, the whole image for a probe not
+    wholly beyond the near plane, none for an inactive one. The ray test runs only there."""
+    boxes = np.zeros((probe_radii.shape[0], 4), dtype=np.int64)
+    for p in range(probe_radii.shape[0]):
+        if not probe_active[p]:
+            boxes[p, 0] = 0
+            boxes[p, 1] = -1
+            continue
+        radius = probe_radii[p]
+        centre_z = probe_centers[p, 2]
+        boxes[p, 1] = height - 1
+        boxes[p, 3] = width - 1
+        if centre_z - radius <= near:
+            continue
+        low, high = _tangent_slopes(probe_centers[p, 1], centre_z, radius)
+        boxes[p, 0] = max(int(math.floor(fy * low + cy)) - 1, 0)
+        boxes[p, 1] = min(int(math.ceil(fy * high + cy)) + 1, height - 1)
+        low, high = _tangent_slopes(probe_centers[p, 0], centre_z, radius)
+        boxes[p, 2] = max(int(math.floor(fx * low + cx)) - 1, 0)
+        boxes[p, 3] = min(int(math.ceil(fx * high + cx)) + 1, width - 1)
+    return boxes
+
+
+@njit(cache=True, error_model='numpy')
 def _shade_kernel(depth_buffer, triangle_buffer, weight_buffer, triangles, material, labels,
                   colors, probe_centers, probe_radii, probe_active, table_enabled,
                   table_offset, table_direction, fx, fy, cx, cy, near, paper_over_table,
                   probe_color, table_color, depth, rgb, u, v, label, hit):
     """Per pixel: nearest of the rastered paper, the probes (centres in the optical frame)
     and the table (world z of the ray point at depth s is position_z + s · table_direction ·
-    (x', y', 1), with table_offset = table_height − position_z), then the outputs."""
+    (x', y', 1), with table_offset = table_height − position_z), then the outputs. Paper and
+    table first over the whole image, then each probe over the pixels that can see it
+    (``depth_buffer`` keeps the nearest depth so far)."""
     height = depth_buffer.shape[0]
     width = depth_buffer.shape[1]
     nan = np.float32(np.nan)
+    table_depth = np.full(width, np.nan)
+    ray_x = np.empty(width)
+    for column in range(width):
+        ray_x[column] = (column - cx) / fx
     for row in range(height):
         ry = (row - cy) / fy
+        if table_enabled:
+            row_term = table_direction[1] * ry
+            # a loop the compiler vectorises: a ray along the plane gets ±inf or NaN
+            for column in range(width):
+                table_depth[column] = table_offset / (
+                    table_direction[0] * ray_x[column] + row_term + table_direction[2])
         for column in range(width):
-            rx = (column - cx) / fx
             # ray: s · (rx, ry, 1), s = depth along the optical axis
             best = np.inf
             kind = 0
-            if table_enabled:
-                slope = table_direction[0] * rx + table_direction[1] * ry + table_direction[2]
-                if slope != 0.0:
-                    s = table_offset / slope
-                    if s > near:
-                        best = s
-                        kind = 3
+            s = table_depth[column]
+            if near < s < np.inf:
+                best = s
+                kind = 3
             paper = depth_buffer[row, column]
             if paper < best + paper_over_table:
                 best = paper
                 kind = 1
-            ray_squared = rx * rx + ry * ry + 1.0
-            for p in range(probe_radii.shape[0]):
-                if not probe_active[p]:
-                    continue
-                along = rx * probe_centers[p, 0] + ry * probe_centers[p, 1] + probe_centers[p, 2]
-                centre_squared = (probe_centers[p, 0] ** 2 + probe_centers[p, 1] ** 2
-                                  + probe_centers[p, 2] ** 2)
-                discriminant = along * along - ray_squared * (centre_squared
-                                                              - probe_radii[p] ** 2)
-                if discriminant < 0.0:
-                    continue
-                root = math.sqrt(discriminant)
-                s = (along - root) / ray_squared
-                if s <= near:
-                    s = (along + root) / ray_squared
-                if near < s < best:
-                    best = s
-                    kind = 2
+            depth_buffer[row, column] = best
             hit[row, column] = kind
             if kind == 0:
                 depth[row, column] = nan
@@ -392,12 +422,12 @@ def _shade_kernel(depth_buffer, triangle_buffer, weight_buffer, triangles, mater
                     rgb[row, column, k] = 0
                 continue
             depth[row, column] = best
-            if kind != 1:
+            if kind == 3:
                 u[row, column] = nan
                 v[row, column] = nan
                 label[row, column] = 0
                 for k in range(3):
-                    rgb[row, column, k] = probe_color[k] if kind == 2 else table_color[k]
+                    rgb[row, column, k] = table_color[k]
                 continue
             t = triangle_buffer[row, column]
             material_x = 0.0
@@ -424,6 +454,35 @@ def _shade_kernel(depth_buffer, triangle_buffer, weight_buffer, triangles, mater
             rgb[row, column, 0] = min(max(int(red + 0.5), 0), 255)
             rgb[row, column, 1] = min(max(int(green + 0.5), 0), 255)
             rgb[row, column, 2] = min(max(int(blue + 0.5), 0), 255)
+    boxes = _probe_pixel_boxes(probe_centers, probe_radii, probe_active, fx, fy, cx, cy, near,
+                               height, width)
+    for p in range(probe_radii.shape[0]):
+        centre_squared = (probe_centers[p, 0] ** 2 + probe_centers[p, 1] ** 2
+                          + probe_centers[p, 2] ** 2)
+        for row in range(boxes[p, 0], boxes[p, 1] + 1):
+            ry = (row - cy) / fy
+            for column in range(boxes[p, 2], boxes[p, 3] + 1):
+                rx = (column - cx) / fx
+                ray_squared = rx * rx + ry * ry + 1.0
+                along = rx * probe_centers[p, 0] + ry * probe_centers[p, 1] + probe_centers[p, 2]
+                discriminant = along * along - ray_squared * (centre_squared
+                                                              - probe_radii[p] ** 2)
+                if discriminant < 0.0:
+                    continue
+                root = math.sqrt(discriminant)
+                s = (along - root) / ray_squared
+                if s <= near:
+                    s = (along + root) / ray_squared
+                if not near < s < depth_buffer[row, column]:
+                    continue
+                depth_buffer[row, column] = s
+                hit[row, column] = 2
+                depth[row, column] = s
+                u[row, column] = nan
+                v[row, column] = nan
+                label[row, column] = 0
+                for k in range(3):
+                    rgb[row, column, k] = probe_color[k]
 
 
 def render(config: CameraConfig, sheet_positions: np.ndarray, triangles: np.ndarray,
