@@ -48,7 +48,7 @@ import numpy as np
 from .core.appearance import AppearanceConfig, PaperAppearance
 from .core.camera import intrinsics
 from .core.sheet import AUX, HINGE
-from .core.topology import vertex_normals
+from .core.topology import spring_end_points, vertex_normals
 
 ENTITY_INFO = 'paper/info'
 ENTITY_MESH = 'paper/mesh'
@@ -155,14 +155,15 @@ def check_reachable(url: str, timeout: float = 3.0) -> None:
                               f'`rerun` (it listens on port 9876) or record to a file') from None
 
 
-def _segments(positions: np.ndarray, ends: np.ndarray, strip_type):
-    """The springs ``ends`` (S, 2) as S two-point line strips, built as one arrow array (the
-    SDK's own conversion loops over the strips in Python: ~15x slower at 65x65)."""
+def _segments(points: np.ndarray, strip_type):
+    """Segments given by their ``points`` (2 S, 3) float32, two by two, as S two-point line
+    strips, built as one arrow array over ``points``' memory (the SDK's own conversion loops
+    over the strips in Python: ~15x slower at 65x65)."""
     import pyarrow as pa  # installed with rerun-sdk (see import_rerun)
 
-    points = np.ascontiguousarray(positions[ends], dtype=np.float32).reshape(-1)
-    inner = pa.FixedSizeListArray.from_arrays(pa.array(points), type=strip_type.value_type)
-    offsets = pa.array(np.arange(0, 2 * ends.shape[0] + 1, 2, dtype=np.int32))
+    inner = pa.FixedSizeListArray.from_arrays(pa.array(points.reshape(-1)),
+                                              type=strip_type.value_type)
+    offsets = pa.array(np.arange(0, points.shape[0] + 1, 2, dtype=np.int32))
     return pa.ListArray.from_arrays(offsets, inner, type=strip_type)
 
 
@@ -483,13 +484,14 @@ class RerunRecorder:
         if self.hinge_every and self._frames_logged % self.hinge_every == 0:
             kinds.insert(0, HINGE)
         for kind in kinds:
-            ends = sheet.spring_vertices[sheet.spring_kind == kind]
+            points = spring_end_points(sheet.positions, sheet.spring_vertices,
+                                       sheet.spring_kind, kind)
             if kind == AUX:
-                if ends.shape[0] == 0 and not self._aux_logged:
+                if points.shape[0] == 0 and not self._aux_logged:
                     continue  # no damage yet and nothing shown before: keep frames lean
                 self._aux_logged = True
             self._stream.log(ENTITY_SPRINGS[kind], rr.LineStrips3D.from_fields(
-                strips=_segments(sheet.positions, ends, self._strip_type)))
+                strips=_segments(points, self._strip_type)))
 
     def _log_probe_inputs(self, probes) -> None:
         # explicit arrow arrays: they keep their type when empty (no probes), so every frame

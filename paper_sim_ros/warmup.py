@@ -14,6 +14,7 @@ from .core import (AppearanceConfig, ContactConfig, SheetConfig, SimulationConfi
 from .core.appearance import PaperAppearance
 from .core.camera import CameraConfig, render
 from .core.config import SOLVERS
+from .core.topology import spring_end_points
 
 
 def warm_up() -> float:
@@ -40,6 +41,8 @@ def warm_up() -> float:
     # the appearance kernels (the node shades every published frame)
     sheet = simulator.sheet
     colors = PaperAppearance(AppearanceConfig(texture_size=16), sheet).vertex_colors(sheet)
+    # what a recording and the markers draw of the springs
+    spring_end_points(sheet.positions, sheet.spring_vertices, sheet.spring_kind, 0)
     # the camera's rasteriser and ray caster
     render(CameraConfig(width=8, height=6), sheet.positions, sheet.triangles, sheet.material,
            simulator.damage_labels(), colors, np.zeros((1, 3)), np.ones(1),

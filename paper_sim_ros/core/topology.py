@@ -92,6 +92,28 @@ def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def spring_end_points(positions, spring_vertices, spring_kind, kind):
+    """The two ends of every spring of ``kind``, in the springs' order, as float32 points
+    (2 S, 3): what a display draws as line segments, gathered in one pass (numpy's select,
+    gather and cast: 0.8 ms for a 65² sheet's HINGE springs, a Rerun frame's largest part)."""
+    count = 0
+    for spring in range(spring_kind.shape[0]):
+        if spring_kind[spring] == kind:
+            count += 1
+    points = np.empty((2 * count, 3), dtype=np.float32)
+    row = 0
+    for spring in range(spring_kind.shape[0]):
+        if spring_kind[spring] != kind:
+            continue
+        for end in range(2):
+            vertex = spring_vertices[spring, end]
+            for axis in range(3):
+                points[row, axis] = positions[vertex, axis]
+            row += 1
+    return points
+
+
+@njit(cache=True)
 def _unit_vertex_normals(positions, triangles, normals):
     """Area-weighted unit vertex normals into ``normals`` (+z where a vertex has no area)."""
     normals[:, :] = 0.0
