@@ -365,12 +365,14 @@ def _probe_pixel_boxes(probe_centers, probe_radii, probe_active, fx, fy, cx, cy,
         boxes[p, 3] = width - 1
         if centre_z - radius <= near:
             continue
+        # clamped as floats: a sphere grazing the near plane far off the axis has slopes
+        # no integer holds
         low, high = _tangent_slopes(probe_centers[p, 1], centre_z, radius)
-        boxes[p, 0] = max(int(math.floor(fy * low + cy)) - 1, 0)
-        boxes[p, 1] = min(int(math.ceil(fy * high + cy)) + 1, height - 1)
+        boxes[p, 0] = int(max(math.floor(fy * low + cy) - 1.0, 0.0))
+        boxes[p, 1] = int(min(math.ceil(fy * high + cy) + 1.0, height - 1.0))
         low, high = _tangent_slopes(probe_centers[p, 0], centre_z, radius)
-        boxes[p, 2] = max(int(math.floor(fx * low + cx)) - 1, 0)
-        boxes[p, 3] = min(int(math.ceil(fx * high + cx)) + 1, width - 1)
+        boxes[p, 2] = int(max(math.floor(fx * low + cx) - 1.0, 0.0))
+        boxes[p, 3] = int(min(math.ceil(fx * high + cx) + 1.0, width - 1.0))
     return boxes
 
 
