@@ -22,7 +22,7 @@ from paper_sim_ros import rerun_replay
 from paper_sim_ros.core import build_simulator, run_scenario
 from paper_sim_ros.core.scenarios import scenario_from_mapping
 from paper_sim_ros.headless import main as headless_main
-from paper_sim_ros.rerun_logger import RerunRecorder, view_bounds
+from paper_sim_ros.rerun_logger import ENTITY_SPRINGS, RerunRecorder, view_bounds
 
 REPO = Path(__file__).resolve().parents[1]
 METRICS = ('step_time', 'real_time_factor', 'energy', 'max_strain', 'breaks', 'folds')
@@ -74,6 +74,8 @@ def record(mapping: dict, path: Path, probe_inputs=None, **recorder_options) -> 
     finally:
         recorder.close()
     truth['final_sha256'] = simulator.sheet.positions_sha256()
+    truth['final_springs'] = (simulator.sheet.spring_vertices.copy(),
+                              simulator.sheet.spring_kind.copy())
     truth['breaks'] = simulator.breaks
     truth['frames'] = scenario.frame_count
     truth['dt'] = dt
@@ -91,6 +93,19 @@ def pinch_recording(tmp_path_factory):
 
 def chunks_of(path: Path, entity: str) -> list:
     return [c for c in RrdReader(path).stream() if c.entity_path == '/' + entity]
+
+
+def last_row_points(path: Path, entity: str, column: str) -> np.ndarray:
+    """The points of ``entity``'s ``column`` in its last row on the sim_time timeline."""
+    rows = []
+    for chunk in chunks_of(path, entity):
+        if chunk.is_static:
+            continue
+        batch = chunk.to_record_batch()
+        times = batch.column('sim_time').cast('int64').to_pylist()
+        rows.extend((times[row], batch.column(column)[row]) for row in range(batch.num_rows))
+    value = max(rows, key=lambda row: row[0])[1]
+    return value.values.flatten().flatten().to_numpy(zero_copy_only=False).reshape(-1, 3)
 
 
 # ------------------------------------------------------------------------- reading back
@@ -186,6 +201,13 @@ def test_springs_and_probes_are_logged(pinch_recording):
         assert sum(c.num_rows for c in temporal) > 0, entity
     hinge = [c for c in chunks_of(path, 'paper/springs/hinge') if not c.is_static]
     assert sum(c.num_rows for c in hinge) == truth['frames']
+    # the last frame's segments: each spring of its kind from end to end, in spring order
+    ends, kinds = truth['final_springs']
+    for kind, entity in ENTITY_SPRINGS.items():
+        logged = last_row_points(path, entity, 'LineStrips3D:strips')
+        expected = truth['positions'][-1][ends[kinds == kind]].astype(np.float32)
+        assert np.count_nonzero(kinds == kind) > 0, entity
+        np.testing.assert_array_equal(logged, expected.reshape(-1, 3), err_msg=entity)
 
 
 # --------------------------------------------------------------------------- bad output
