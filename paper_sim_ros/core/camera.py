@@ -356,8 +356,7 @@ def _probe_pixel_boxes(probe_centers, probe_radii, probe_active, fx, fy, cx, cy,
     boxes = np.zeros((probe_radii.shape[0], 4), dtype=np.int64)
     for p in range(probe_radii.shape[0]):
         if not probe_active[p]:
-            boxes[p, 0] = 0
-            boxes[p, 1] = -1
+            boxes[p, 1] = -1  # rows 0 to -1: none
             continue
         radius = probe_radii[p]
         centre_z = probe_centers[p, 2]
@@ -464,7 +463,7 @@ def _shade_kernel(depth_buffer, triangle_buffer, weight_buffer, triangles, mater
         for row in range(boxes[p, 0], boxes[p, 1] + 1):
             ry = (row - cy) / fy
             for column in range(boxes[p, 2], boxes[p, 3] + 1):
-                rx = (column - cx) / fx
+                rx = ray_x[column]
                 ray_squared = rx * rx + ry * ry + 1.0
                 along = rx * probe_centers[p, 0] + ry * probe_centers[p, 1] + probe_centers[p, 2]
                 discriminant = along * along - ray_squared * (centre_squared
