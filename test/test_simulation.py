@@ -999,6 +999,78 @@ def test_global_step_solves_its_system_with_pins():
         np.testing.assert_array_equal(positions[pinned], pinned_positions)
 
 
+def test_sparse_ldl_factors_in_the_order_given_or_refuses():
+    """core/sparse_ldl.ldl_factor: L D Lᵀ equals the permuted matrix (the bending system, the
+    densest the solver factors, in a scrambled order and in reverse), each column's rows
+    ascending below the diagonal; an indefinite matrix and a fill beyond the limit are
+    refused (None), not factored."""
+    import scipy.sparse as sparse
+    from paper_sim_ros.core.bending import SheetBending
+    from paper_sim_ros.core.projective import system_matrix
+    from paper_sim_ros.core.sparse_ldl import ldl_factor
+    sheet, pinned, _ = pinned_springs_system()
+    entries = SheetBending(sheet.positions, sheet.triangles, sheet.material, 4e-4,
+                           np.zeros((0, 2), dtype=np.int32)).matrix_entries()
+    matrix = system_matrix(sheet.vertex_mass, entries, 1.0 / 60.0).tocsc()
+    count = matrix.shape[0]
+    for order in (np.random.default_rng(3).permutation(count), np.arange(count)[::-1]):
+        pointer, index, lower, diagonal = ldl_factor(matrix, order)
+        assert pointer.size == count + 1 and diagonal.min() > 0
+        columns = np.repeat(np.arange(count), np.diff(pointer.astype(np.int64)))
+        assert np.all(index > columns), 'an entry on or above the diagonal'
+        assert np.all(np.diff(index.astype(np.int64))[np.diff(columns) == 0] > 0)
+        unit_lower = sparse.csc_matrix((lower, index, pointer), shape=(count, count)) \
+            + sparse.identity(count)
+        product = (unit_lower @ sparse.diags(diagonal) @ unit_lower.T).toarray()
+        permuted = matrix[order][:, order].toarray()
+        np.testing.assert_allclose(product, permuted, rtol=0, atol=1e-9 * np.abs(permuted).max())
+        assert ldl_factor(matrix, order, most_entries=pointer[-1] - 1) is None
+    indefinite = matrix.copy()
+    indefinite[5, 5] = -1.0
+    assert ldl_factor(indefinite, np.arange(count)) is None
+
+
+def test_a_mesh_is_refactored_in_its_first_factors_order():
+    """A global step made after another of the same mesh (other pins, a longer sub-step,
+    vertices added) factors in the first one's elimination order, the added and the once
+    pinned vertices placed by their neighbours, with about its fill, and solves its own
+    system exactly; one whose fill grew beyond REORDER_FILL is ordered afresh."""
+    from paper_sim_ros.core import projective
+    from paper_sim_ros.core.projective import global_step, system_matrix
+    sheet, pinned, springs = pinned_springs_system()
+    count = sheet.vertex_count
+    rng = np.random.default_rng(11)
+    first = global_step(sheet.vertex_mass, pinned, springs, 1.0 / 60.0)
+    assert np.array_equal(np.sort(first.elimination_rank), np.arange(count))
+    # two vertices added, each tied to one of the old ones (a break's copy); other pins
+    rows, columns, values = springs
+    tie = np.array([[count, 40], [count + 1, count // 2]])
+    mass = np.concatenate([sheet.vertex_mass, sheet.vertex_mass[[40, count // 2]]])
+    grown = (np.concatenate([rows, tie[:, 0], tie[:, 1], tie[:, 0], tie[:, 1]]),
+             np.concatenate([columns, tie[:, 0], tie[:, 1], tie[:, 1], tie[:, 0]]),
+             np.concatenate([values, np.full(2, 200.0), np.full(2, 200.0),
+                             np.full(2, -200.0), np.full(2, -200.0)]))
+    other_pins = np.zeros(count + 2, dtype=bool)
+    other_pins[rng.choice(count, 12, replace=False)] = True
+    step = global_step(mass, other_pins, grown, 1.0 / 120.0, first)
+    assert step.elimination_rank.size == count + 2
+    assert step.factor_entries <= projective.REORDER_FILL * first.ordered_entries \
+        * step.free.size
+    rhs = rng.normal(size=(count + 2, 3))
+    positions = rng.normal(size=(count + 2, 3))
+    held = positions[other_pins].copy()
+    step.solve(rhs, positions)
+    system = system_matrix(mass, grown, 1.0 / 120.0)
+    np.testing.assert_allclose((system @ positions - rhs)[~other_pins], 0.0, atol=1e-9)
+    np.testing.assert_array_equal(positions[other_pins], held)
+    # the old order scrambled: far more fill, so a fresh minimum degree order instead
+    first.elimination_rank = rng.permutation(count)
+    fresh = global_step(sheet.vertex_mass, pinned, springs, 1.0 / 90.0, first)
+    assert fresh.factor_entries <= projective.REORDER_FILL * first.ordered_entries \
+        * fresh.free.size
+    assert not np.array_equal(fresh.elimination_rank, first.elimination_rank)
+
+
 def assert_steps_solve_as_new_factors(simulator, h: float, rng) -> None:
     """The simulator's two global steps solve as new factors of its mesh's systems do."""
     from paper_sim_ros.core.projective import GlobalStep, spring_entries

@@ -23,6 +23,7 @@ import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
 
 from .kernels import EPSILON_LENGTH
+from .sparse_ldl import ldl_factor
 
 
 @njit(cache=True)
@@ -312,7 +313,11 @@ class GlobalStep:
         the factor's fill and each solve's cost: the springs' step has none."""
         self._factor(system_matrix(vertex_mass, stiffness, h), pinned)
 
-    def _factor(self, system: sparse.csr_matrix, pinned: np.ndarray) -> None:
+    def _factor(self, system: sparse.csr_matrix, pinned: np.ndarray,
+                previous: 'GlobalStep | None' = None) -> None:
+        """Factor ``system`` with the ``pinned`` vertices held; in ``previous``'s
+        elimination order where it has one (the mesh's first factor's, core/sparse_ldl.py),
+        else in a new minimum degree order."""
         self.system = system
         """M/h² + K over all vertices (what an UpdatedStep compares a changed mesh's with)."""
         self.pinned_mask = pinned.copy()
@@ -323,6 +328,8 @@ class GlobalStep:
         self._coupling = (coupling.indptr.astype(np.int64),
                           self.pinned[coupling.indices].astype(np.int64), coupling.data)
         reduced = system[self.free][:, self.free].tocsc()
+        if previous is not None and self._factor_in_order(reduced, system, previous):
+            return
         # symmetric positive definite: no pivoting needed, minimum degree on Aᵀ + A
         factor = sparse_linalg.splu(reduced, permc_spec='MMD_AT_PLUS_A',
                                     diag_pivot_thresh=0.0,
@@ -331,8 +338,41 @@ class GlobalStep:
         # U = D Lᵀ: L and U's diagonal are all a solve needs
         if not np.array_equal(factor.perm_r, factor.perm_c):
             raise RuntimeError('the global step lost its symmetric ordering')
-        self._factors = _strictly_lower(factor.L) + (factor.U.diagonal(),
-                                                     factor.perm_r.astype(np.int32))
+        self._set_factors(_strictly_lower(factor.L) + (factor.U.diagonal(),
+                                                       factor.perm_r.astype(np.int32)))
+        rank = np.full(system.shape[0], -1, dtype=np.int64)
+        rank[self.free] = factor.perm_r
+        self.elimination_rank = _ranked_everywhere(rank, system)
+        """Each vertex's place in the elimination order (pinned ones too, where a later
+        pin set frees them): the order every factor of this mesh is made in."""
+        self.ordered_entries = self.factor_entries / max(self.free.size, 1)
+        """The factor's entries per unknown when its order was made."""
+
+    def _factor_in_order(self, reduced: sparse.csc_matrix, system: sparse.csr_matrix,
+                         previous: 'GlobalStep') -> bool:
+        """Factor ``reduced`` in ``previous``'s elimination order (the vertices added since
+        placed by their neighbours); False where its fill has grown beyond REORDER_FILL
+        (a new order is then due) or the system is not positive definite."""
+        rank = previous.elimination_rank
+        if rank.size < system.shape[0]:
+            rank = _ranked_everywhere(np.concatenate(
+                [rank, np.full(system.shape[0] - rank.size, -1, dtype=np.int64)]), system)
+        order = np.argsort(rank[self.free], kind='stable')
+        factors = ldl_factor(reduced, order, REORDER_FILL * previous.ordered_entries
+                             * self.free.size)
+        if factors is None:
+            return False
+        permutation = np.empty(order.size, dtype=np.int32)
+        permutation[order] = np.arange(order.size, dtype=np.int32)
+        self._set_factors(factors + (permutation,))
+        self.elimination_rank = rank
+        self.ordered_entries = previous.ordered_entries
+        return True
+
+    def _set_factors(self, factors: tuple) -> None:
+        """(pointer, index, value, diagonal, permutation): L's strictly lower part in CSC,
+        D, and each free vertex's row in the factor's order."""
+        self._factors = factors
         self.factor_entries = self._factors[1].size
         self.terms_taken = 0
         """Rank-one terms the factor has taken in place since it was made (``updated``)."""
@@ -382,6 +422,11 @@ class GlobalStep:
                         self._work)
 
 
+REORDER_FILL = 1.3
+"""A factor made in a mesh's kept elimination order (GlobalStep._factor_in_order) whose
+entries per unknown exceed this × those of the factor the order was made for is made in a
+new minimum degree order instead (the vertices breaks added, placed by their neighbours,
+fill more than a fresh order would)."""
 IN_PLACE_TERMS = 1.0
 """A factor updated in place is made anew once it has taken this many rank-one terms per
 unknown: downdates lose digits (squeeze, 129²: a known x solved to 1.5e-9 after 17 190
@@ -439,8 +484,27 @@ def global_step(vertex_mass: np.ndarray, pinned: np.ndarray,
         if step is not None:
             return step
     step = GlobalStep.__new__(GlobalStep)
-    step._factor(system, pinned)
+    step._factor(system, pinned,
+                 previous.base if isinstance(previous, UpdatedStep) else previous)
     return step
+
+
+def _ranked_everywhere(rank: np.ndarray, system: sparse.csr_matrix) -> np.ndarray:
+    """``rank`` (each vertex's place in an elimination order, -1 where it has none: a pinned
+    vertex, one a break added) with every vertex placed: an unplaced vertex just before its
+    earliest placed neighbour, so that it is eliminated while its neighbours are all still
+    there and fills only among them, as a minimum degree order would take a vertex of
+    few neighbours early. Returned as places 0 .. V-1."""
+    key = rank.astype(np.float64)
+    placed = rank >= 0
+    for vertex in np.flatnonzero(~placed):
+        neighbours = system.indices[system.indptr[vertex]:system.indptr[vertex + 1]]
+        neighbours = neighbours[placed[neighbours]]
+        key[vertex] = key[neighbours].min() - 0.5 if neighbours.size else key.max() + 1.0
+        placed[vertex] = True
+    ranked = np.empty(rank.size, dtype=np.int64)
+    ranked[np.argsort(key, kind='stable')] = np.arange(rank.size)
+    return ranked
 
 
 class UpdatedStep:
