@@ -19,12 +19,18 @@ damage on or off, and one of four families:
 
 Per run: max HINGE strain, breaks, folds, deepest vertex in a probe (pinned vertices
 included) and under the table, and anything wrong (an exception other than a refused
-scenario, NaN, an invalid mesh, mass not conserved, over ``--time-limit`` seconds). Then
-per family the spread of the max strain. A script that prints figures, not a test.
+scenario, NaN, an invalid mesh, mass not conserved, over ``--time-limit`` seconds); and
+what the probe nearest the worst spring was doing in the frame of the run's largest strain
+(``peak_kind``): moving ``towards`` what else holds the sheet (the pins, else the other
+fingertip pressing it onto the table) and so pushing paper together, ``away`` from it and
+so pulling the paper behind, ``across`` it, moving on a sheet nothing else holds
+(``free``), ``still``, or no probe near (``none``). Then per family the spread of the max
+strain, and the kinds of the runs beyond 2 %. A script that prints figures, not a test.
 """
 from __future__ import annotations
 
 import argparse
+import collections
 from concurrent.futures import ProcessPoolExecutor
 import math
 import os
@@ -38,6 +44,7 @@ import numpy as np  # noqa: E402
 
 from paper_sim_ros.core import load_scenario, run_scenario  # noqa: E402
 from paper_sim_ros.core.runner import build_simulator  # noqa: E402
+from paper_sim_ros.core.sheet import HINGE  # noqa: E402
 
 FAMILIES = ('table', 'pinned', 'poke', 'wild')
 MATERIALS = ('printer_paper', 'cardboard', 'banknote')
@@ -150,6 +157,46 @@ def scene(family: str, index: int) -> dict:
     return _fingertips_on_table(rng, pinned=family == 'pinned')
 
 
+PEAK_HEADING = 0.5
+"""A probe heads ``towards`` (``away`` from) what holds the sheet where the cosine of its
+motion with the direction to it is above this (below minus this); ``across`` between."""
+PEAK_STILL = 1e-3
+"""[m/s] A probe slower than this stands ``still``."""
+
+
+def peak_kind(simulator, start: np.ndarray) -> str:
+    """What the active probe nearest the worst HINGE spring did in the frame just stepped,
+    from ``start`` (the probes' centres at its start) to where they are (the module's
+    docstring)."""
+    sheet, probes = simulator.sheet, simulator.probes
+    hinge = np.flatnonzero(sheet.spring_kind == HINGE)
+    ends = sheet.spring_vertices[hinge]
+    length = np.linalg.norm(sheet.positions[ends[:, 1]] - sheet.positions[ends[:, 0]], axis=1)
+    worst = np.argmax(np.abs(length / sheet.spring_rest_length[hinge] - 1.0))
+    middle = sheet.positions[ends[worst]].mean(axis=0)
+    active = np.flatnonzero(probes.active)
+    if active.size == 0:
+        return 'none'
+    probe = active[np.argmin(np.linalg.norm(probes.end[active] - middle, axis=1))]
+    motion = (probes.end[probe] - start[probe])[:2]
+    if np.linalg.norm(motion) < PEAK_STILL * simulator.config.solver.dt:
+        return 'still'
+    ground = simulator.config.contact.ground_height
+    pressing = [p for p in active if p != probe
+                and probes.end[p, 2] - probes.radius[p] < ground]
+    if np.any(sheet.pinned):
+        holder = sheet.positions[sheet.pinned].mean(axis=0)
+    elif pressing:
+        holder = probes.end[pressing[0]]
+    else:
+        return 'free'
+    towards = (holder - probes.end[probe])[:2]
+    cosine = float(np.dot(motion, towards)
+                   / (np.linalg.norm(motion) * np.linalg.norm(towards) + 1e-300))
+    return 'towards' if cosine > PEAK_HEADING else 'away' if cosine < -PEAK_HEADING \
+        else 'across'
+
+
 class _TooSlow(Exception):
     pass
 
@@ -176,11 +223,19 @@ def measure(family: str, index: int, time_limit: int, membrane: float | None = N
         scenario = load_scenario(mapping)
         simulator = build_simulator(scenario)
         mass = simulator.sheet.total_mass
-        metrics = run_scenario(scenario, simulator=simulator)
+        peak = {'strain': -1.0, 'kind': 'none', 'start': simulator.probes.end.copy()}
+
+        def on_frame(simulator, seconds) -> None:
+            strain = simulator.max_strain()
+            if strain > peak['strain'] and peak['start'].shape == simulator.probes.end.shape:
+                peak.update(strain=strain, kind=peak_kind(simulator, peak['start']))
+            peak['start'] = simulator.probes.end.copy()
+        metrics = run_scenario(scenario, simulator=simulator, on_frame=on_frame)
         record.update(strain=metrics['max_strain'], breaks=metrics['breaks'],
                       folds=metrics['folds'], in_probe=metrics['max_probe_penetration_m'],
                       below_table=metrics['max_table_penetration_m'],
-                      asleep=metrics['frames_asleep'] / max(metrics['steps'], 1))
+                      asleep=metrics['frames_asleep'] / max(metrics['steps'], 1),
+                      peak=peak['kind'])
         if metrics['nan']:
             record['problems'].append('non-finite state')
         if not metrics['mesh_valid']:
@@ -222,7 +277,7 @@ def main() -> None:
             figures = (f"strain {100 * record['strain']:8.2f} %  breaks {record['breaks']:4d}  "
                        f"folds {record['folds']:5d}  in probe {1e3 * record['in_probe']:6.2f} mm  "
                        f"below table {1e3 * record['below_table']:5.2f} mm  "
-                       f"asleep {record['asleep']:4.0%}"
+                       f"asleep {record['asleep']:4.0%}  peak {record['peak']:7s}"
                        if 'strain' in record else f"refused: {record.get('refused', '')}")
             print(f"{record['family']:7s} {record['index']:4d}  {figures}  "
                   f"{record['seconds']:6.1f} s  {'; '.join(record['problems'])}", flush=True)
@@ -237,6 +292,10 @@ def main() -> None:
               f'90th percentile {100 * np.percentile(strain, 90):.1f} %, '
               f'worst {100 * strain.max():.1f} %, under 2 %: {np.sum(strain < 0.02)}; '
               f'runs with a problem: {wrong or "none"}')
+        kinds = collections.Counter(r['peak'] for r in ran if r['strain'] >= 0.02)
+        if kinds:
+            print(f'{"":7s} beyond 2 %, the peak: '
+                  + ', '.join(f'{kind} {count}' for kind, count in kinds.most_common()))
 
 
 if __name__ == '__main__':
