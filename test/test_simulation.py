@@ -1063,6 +1063,9 @@ def test_a_mesh_is_refactored_in_its_first_factors_order():
     system = system_matrix(mass, grown, 1.0 / 120.0)
     np.testing.assert_allclose((system @ positions - rhs)[~other_pins], 0.0, atol=1e-9)
     np.testing.assert_array_equal(positions[other_pins], held)
+    # a mesh of fewer vertices is another mesh: ordered afresh, not in the larger one's order
+    smaller = global_step(sheet.vertex_mass, pinned, springs, 1.0 / 90.0, step)
+    assert smaller.elimination_rank.size == count
     # the old order scrambled: far more fill, so a fresh minimum degree order instead
     first.elimination_rank = rng.permutation(count)
     fresh = global_step(sheet.vertex_mass, pinned, springs, 1.0 / 90.0, first)

@@ -352,8 +352,11 @@ class GlobalStep:
                          previous: 'GlobalStep') -> bool:
         """Factor ``reduced`` in ``previous``'s elimination order (the vertices added since
         placed by their neighbours); False where its fill has grown beyond REORDER_FILL
-        (a new order is then due) or the system is not positive definite."""
+        (a new order is then due), the system is not positive definite, or ``previous``
+        had more vertices (another mesh: its order would be of other vertices)."""
         rank = previous.elimination_rank
+        if rank.size > system.shape[0]:
+            return False
         if rank.size < system.shape[0]:
             rank = _ranked_everywhere(np.concatenate(
                 [rank, np.full(system.shape[0] - rank.size, -1, dtype=np.int64)]), system)
