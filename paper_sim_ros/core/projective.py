@@ -425,11 +425,13 @@ class GlobalStep:
                         self._work)
 
 
-REORDER_FILL = 1.3
+REORDER_FILL = 1.05
 """A factor made in a mesh's kept elimination order (GlobalStep._factor_in_order) whose
 entries per unknown exceed this × those of the factor the order was made for is made in a
-new minimum degree order instead (the vertices breaks added, placed by their neighbours,
-fill more than a fresh order would)."""
+new minimum degree order instead. Another pin set or sub-step length keeps the fill
+(65² springs: 1.003 ×); the vertices breaks add, placed by their neighbours, fill more (a
+crumple of 50 at 65²: 1.2 × in the bending factor), and every solve after costs that
+much more: at 5 % more entries, a few seconds of solves pay for the new order."""
 IN_PLACE_TERMS = 1.0
 """A factor updated in place is made anew once it has taken this many rank-one terms per
 unknown: downdates lose digits (squeeze, 129²: a known x solved to 1.5e-9 after 17 190
