@@ -324,12 +324,13 @@ class GlobalStep:
         self.free = np.flatnonzero(~pinned).astype(np.int64)
         self.pinned = np.flatnonzero(pinned).astype(np.int64)
         # pinned vertices are not unknowns: their couplings go to the right-hand side
-        coupling = system[self.free][:, self.pinned].tocsr()
+        free_rows = system[self.free]
+        coupling = free_rows[:, self.pinned].tocsr()
         self._coupling = (coupling.indptr.astype(np.int64),
                           self.pinned[coupling.indices].astype(np.int64), coupling.data)
-        reduced = system[self.free][:, self.free].tocsc()
-        if previous is not None and self._factor_in_order(reduced, system, previous):
+        if previous is not None and self._factor_in_order(system, previous):
             return
+        reduced = free_rows[:, self.free].tocsc()
         # symmetric positive definite: no pivoting needed, minimum degree on Aᵀ + A
         factor = sparse_linalg.splu(reduced, permc_spec='MMD_AT_PLUS_A',
                                     diag_pivot_thresh=0.0,
@@ -348,12 +349,11 @@ class GlobalStep:
         self.ordered_entries = self.factor_entries / max(self.free.size, 1)
         """The factor's entries per unknown when its order was made."""
 
-    def _factor_in_order(self, reduced: sparse.csc_matrix, system: sparse.csr_matrix,
-                         previous: 'GlobalStep') -> bool:
-        """Factor ``reduced`` in ``previous``'s elimination order (the vertices added since
-        placed by their neighbours); False where its fill has grown beyond REORDER_FILL
-        (a new order is then due), the system is not positive definite, or ``previous``
-        had more vertices (another mesh: its order would be of other vertices)."""
+    def _factor_in_order(self, system: sparse.csr_matrix, previous: 'GlobalStep') -> bool:
+        """Factor ``system`` on the free vertices in ``previous``'s elimination order (the
+        vertices added since placed by their neighbours); False where its fill has grown
+        beyond REORDER_FILL (a new order is then due), the system is not positive definite,
+        or ``previous`` had more vertices (another mesh: its order would be of others)."""
         rank = previous.elimination_rank
         if rank.size > system.shape[0]:
             return False
@@ -361,7 +361,7 @@ class GlobalStep:
             rank = _ranked_everywhere(np.concatenate(
                 [rank, np.full(system.shape[0] - rank.size, -1, dtype=np.int64)]), system)
         order = np.argsort(rank[self.free], kind='stable')
-        factors = ldl_factor(reduced, order, REORDER_FILL * previous.ordered_entries
+        factors = ldl_factor(system, self.free[order], REORDER_FILL * previous.ordered_entries
                              * self.free.size)
         if factors is None:
             return False

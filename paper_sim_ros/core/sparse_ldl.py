@@ -93,11 +93,12 @@ def _factor_rows(pointer, index, value, parent, column_pointer, row_index, lower
 
 def ldl_factor(matrix: sparse.spmatrix, order: np.ndarray,
                most_entries: float = np.inf) -> tuple | None:
-    """(pointer, index, value, diagonal) of P A Pᵀ = L D Lᵀ for the symmetric ``matrix`` A,
-    P taking row ``order[k]`` of A to row k: L's strictly lower part in CSC (unsigned
-    indices, rows ascending within a column) and D. None if A is not positive definite,
-    or if L would have more than ``most_entries`` entries (known before the numeric work:
-    the order no longer suits the matrix)."""
+    """(pointer, index, value, diagonal) of P A Pᵀ = L D Lᵀ for the symmetric ``matrix``
+    restricted to the rows and columns ``order`` selects, A, P taking its row ``order[k]`` to
+    row k (a permutation of them all, or of some: the unknowns of a system with pins): L's
+    strictly lower part in CSC (unsigned indices, rows ascending within a column) and D.
+    None if A is not positive definite, or if L would have more than ``most_entries``
+    entries (known before the numeric work: the order no longer suits the matrix)."""
     permuted = sparse.csc_matrix(matrix)[order][:, order].tocsc()
     permuted.sort_indices()
     count = permuted.shape[0]
