@@ -134,6 +134,53 @@ def test_falling_behind_is_graceful_and_reported(tmp_path):
         stop_cleanly(process)
 
 
+def test_a_node_behind_the_clock_takes_every_pose(tmp_path):
+    """Poses sent at 200 Hz to a node that steps four frames a tick and never catches up:
+    every one reaches its track. The executor takes one message a subscription each time it
+    waits, and such a node finds a tick due every time: before each tick took the poses
+    waiting, it took one a tick, and those it did take were up to the queue's depth old (the
+    demo at 65²: 0.53 s)."""
+    domain = new_domain_id()
+    process = start_node(tmp_path, {'sheet.nx': 65, 'sheet.ny': 65, 'physics_rate': 1000.0,
+                                    'max_catchup_frames': 4, 'diagnostics_rate': 4.0,
+                                    'solver.sleep_speed': 0.0, 'probe_timeout': 1.0},
+                         domain_id=domain)
+    client = RosClient(domain)
+    try:
+        client.subscribe(PointCloud2, 'paper/points')
+        client.subscribe(DiagnosticArray, '/diagnostics')
+        poses = client.node.create_publisher(PoseStamped, 'probe/pose', 1000)
+        wait_for_cloud(client, process)
+        client.spin_until(lambda: client.node.count_subscribers('probe/pose') >= 1, 30,
+                          'the node to subscribe to probe/pose', process)
+        sent = 0
+        started = time.monotonic()
+        while time.monotonic() < started + 3.0:
+            if time.monotonic() >= started + sent / 200.0:
+                pose = PoseStamped()  # hovering 0.5 m above the sheet, moving along x
+                pose.header.frame_id = 'world'
+                pose.header.stamp = client.node.get_clock().now().to_msg()
+                pose.pose.position.x = 0.05 * (time.monotonic() - started)
+                pose.pose.position.z = 0.5
+                pose.pose.orientation.w = 1.0
+                poses.publish(pose)
+                sent += 1
+            client.executor.spin_once(timeout_sec=0.001)
+        since = time.monotonic()
+        client.spin_for(1.5)
+        reports = [{pair.key: pair.value for pair in array.status[0].values}
+                   for array in client.messages('/diagnostics', since + 0.5)]
+    finally:
+        client.close()
+        stop_cleanly(process)
+    assert sent >= 500, f'only {sent} poses sent in 3 s'
+    assert reports, 'no diagnostics after the poses'
+    values = reports[-1]
+    assert int(values['slipped_frames']) > 0, 'the node kept up: nothing here was tested'
+    assert int(values['poses_received']) == sent, \
+        f"{values['poses_received']} of {sent} poses reached the node's tracks"
+
+
 @pytest.mark.slow
 def test_several_probes_each_on_its_topic(tmp_path):
     domain = new_domain_id()
