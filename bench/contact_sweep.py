@@ -3,6 +3,7 @@
     .venv/bin/python bench/contact_sweep.py [--scenarios press drag ...] [--grids 33 65]
         [--seeds 0 1 2 3 4] [--jobs 2] [--no-damage] [--substeps 4] [--energy-restoring]
         [--length-projection] [--membrane 30 [--membrane-iterations 10]]
+        [--set release_substeps=4 ...]
 
 Per run: max HINGE strain over the run, deepest vertex inside a probe and below the table
 (beyond a pressed probe's dimple), breaks, folds, relaxed deviation, mesh validity, mass
@@ -14,6 +15,7 @@ Then the worst over seeds per scenario and grid. A script, not a test.
 from __future__ import annotations
 
 import argparse
+import json
 from concurrent.futures import ProcessPoolExecutor
 import os
 import sys
@@ -94,6 +96,8 @@ def main(argv: list[str] | None = None) -> int:
                         "'always'; 0: none; default: the solver's)")
     parser.add_argument('--membrane-iterations', type=int, default=None,
                         help='solver.membrane_iterations (default: the solver\'s)')
+    parser.add_argument('--set', nargs='+', default=[], metavar='NAME=VALUE',
+                        help='solver settings overridden, each NAME=VALUE (a JSON value)')
     args = parser.parse_args(argv)
     options = {option: True for option in ('energy_restoring', 'length_projection')
                if getattr(args, option)}
@@ -103,6 +107,9 @@ def main(argv: list[str] | None = None) -> int:
         options.update(membrane_weight=args.membrane, membrane_scope='always')
     if args.membrane_iterations is not None:
         options['membrane_iterations'] = args.membrane_iterations
+    for setting in args.set:
+        name, _, value = setting.partition('=')
+        options[name] = json.loads(value)
     runs = [(name, grid, seed, not args.no_damage, args.substeps, options)
             for name in args.scenarios for grid in args.grids for seed in args.seeds]
     results = []

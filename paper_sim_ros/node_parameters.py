@@ -199,8 +199,9 @@ GLOBAL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   (1e-6, 0.49)),
     ParameterSpec('solver.release_substeps', _SOLVER.release_substeps,
                   'Sub-steps a frame, times substeps, for release_time after a fingertip '
-                  'lets go of the sheet (1: never more): a squeezed arch set free springs '
-                  'back in about a frame, faster than one sub-step follows (docs/contact.md).',
+                  'lets go of the sheet while it is pushed together (1: never more): a '
+                  'squeezed arch set free springs back in about a frame, faster than one '
+                  'sub-step follows (docs/contact.md).',
                   (1, 64)),
     ParameterSpec('solver.release_time', _SOLVER.release_time,
                   'How long [s] the sub-steps of release_substeps (or give_substeps) last '

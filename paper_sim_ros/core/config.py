@@ -153,16 +153,15 @@ class SolverConfig:
     membrane_iterations: int = 10
     """Conjugate-gradient iterations of the membrane's solve per sub-step, at most (each
     a bending solve)."""
-    release_substeps: int = 1
+    release_substeps: int = 4
     """('constrained') Sub-steps a frame, as a multiple of ``substeps``, for
-    ``release_time`` after a fingertip lets go of the sheet (1: never more). A squeezed
+    ``release_time`` after a fingertip lets go of the sheet while it is pushed together (a
+    held spring squeezed beyond ``buckling_compression``; 1: never more). A squeezed
     arch set free springs back in its bending mode in about a frame (a 0.2 m arch: a
     quarter period of 22 ms), which one sub-step cannot follow: its crest folds on the way
-    down (the squeeze at 65², seed 2, ``membrane_iterations`` 40 and
-    ``gripped_max_compression`` 0.003: 249 folds with 1, none with 4). Off by default:
-    every let-go pays two factorisations and the sub-steps, and what else the squeeze does
-    at those settings swings with them (docs/contact.md, "The membrane's conjugate
-    gradients run longer")."""
+    down and strains the sheet (`squeeze` at 65², seeds 0, 1, 3: 27 folds and 23.2 % with
+    1, none and 12.6 %, its largest strain then the push's, with 4; docs/contact.md). A
+    fingertip lifting off paper it did not push together starts none."""
     release_time: float = 0.25
     """How long [s] the sub-steps of ``release_substeps`` (or ``give_substeps``) last after
     a let-go."""
