@@ -77,10 +77,10 @@ POSE_QOS = QoSProfile(depth=POSE_HISTORY, history=HistoryPolicy.KEEP_LAST,
                       reliability=ReliabilityPolicy.RELIABLE)
 """As deep as the track: the poses that came while a tick ran (one tick behind the clock
 at 65² takes 0.1-0.2 s) reach the track (``_take_waiting_poses``), which places each by its
-stamp. With depth 1 only
-the last of them did, the track's poses lay too far apart to extrapolate from, and the probe
-stood still for the last frames of every tick, then went on at once (the demo, 65²: 13-15 %
-strain). Under a flood the same few poses wait, never more."""
+stamp. With depth 1 only the last of them did, the track's poses lay too far apart to
+extrapolate from, and the probe stood still for the last frames of every tick, then went on
+at once (the demo, 65²: 13-15 % strain). Under a flood the same few poses wait, never
+more."""
 CLOCK_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE)
 """/clock with ``publish_clock``: latest only (rclpy's time source reads it best-effort)."""
