@@ -170,10 +170,8 @@ def peak_kind(simulator, start: np.ndarray) -> str:
     docstring)."""
     sheet, probes = simulator.sheet, simulator.probes
     hinge = np.flatnonzero(sheet.spring_kind == HINGE)
-    ends = sheet.spring_vertices[hinge]
-    length = np.linalg.norm(sheet.positions[ends[:, 1]] - sheet.positions[ends[:, 0]], axis=1)
-    worst = np.argmax(np.abs(length / sheet.spring_rest_length[hinge] - 1.0))
-    middle = sheet.positions[ends[worst]].mean(axis=0)
+    worst = hinge[np.argmax(np.abs(sheet.strain(HINGE)))]
+    middle = sheet.positions[sheet.spring_vertices[worst]].mean(axis=0)
     active = np.flatnonzero(probes.active)
     if active.size == 0:
         return 'none'
